@@ -1,0 +1,283 @@
+"""Parallel rewriting of a grammar's axiom.
+
+All extensions combine: bracketed, parametric, stochastic (seeded
+`numpy.random.Generator`), context-sensitive with ABOP's rules (context skips
+ignored symbols and whole bracketed side branches), conditions, and the cut
+symbol `%` (erases the rest of its branch). Hard caps on module count,
+estimated memory and total work make a runaway grammar a clear `LimitError`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import GrammarError, LimitError
+from .expr import math_message
+from .grammar import MAX_ITERATIONS, Grammar, Module, Production
+
+DEFAULT_MAX_MODULES = 2_000_000
+DEFAULT_MAX_BYTES = 1 << 30  # 1 GiB, estimated
+DEFAULT_MAX_WORK = 50_000_000  # modules visited over all iterations
+_BYTES_PER_MODULE = 120  # list slot + tuple + empty params tuple, CPython 3.11
+_BYTES_PER_PARAM = 32  # float object + tuple slot
+
+
+@dataclass
+class Derivation:
+    """The derived module string and how it was obtained."""
+
+    modules: list[Module]
+    grammar: Grammar
+    seed: int
+    iterations: int
+    counts: list[int] = field(default_factory=list)  # module count after each iteration
+    seconds: float = 0.0
+
+    @property
+    def modules_per_second(self) -> float:
+        produced = sum(self.counts)
+        return produced / self.seconds if self.seconds > 0 else math.inf
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Caps on derivation. `max_bytes` is an estimate of the string's memory."""
+
+    max_modules: int = DEFAULT_MAX_MODULES
+    max_bytes: int = DEFAULT_MAX_BYTES
+    max_work: int = DEFAULT_MAX_WORK
+
+
+def derive(grammar: Grammar, seed: int | None = None, iterations: int | None = None,
+           limits: Limits = Limits(),
+           progress: Callable[[int, int], None] | None = None) -> Derivation:
+    """Rewrite the axiom `iterations` times (default: the grammar's)."""
+    n = grammar.iterations if iterations is None else int(iterations)
+    if not 0 <= n <= MAX_ITERATIONS:
+        raise LimitError(f"iterations = {n} is out of range [0, {MAX_ITERATIONS}]")
+    seed = grammar.seed if seed is None else int(seed)
+    if seed < 0:
+        raise LimitError(f"seed must be >= 0, got {seed}")
+    rng = np.random.default_rng(seed)
+    rewriter = _Rewriter(grammar, rng, limits)
+    modules: list[Module] = list(grammar.axiom)
+    counts: list[int] = []
+    start = time.perf_counter()
+    for it in range(n):
+        modules = rewriter.step(modules, it + 1)
+        counts.append(len(modules))
+        if progress is not None:
+            progress(it + 1, len(modules))
+    return Derivation(modules, grammar, seed, n, counts, time.perf_counter() - start)
+
+
+def derive_many(grammar: Grammar, seeds: Sequence[int], iterations: int | None = None,
+                limits: Limits = Limits()) -> list[Derivation]:
+    """One instance per seed: different stochastic choices and random draws."""
+    return [derive(grammar, s, iterations, limits) for s in seeds]
+
+
+def format_modules(modules: Sequence[Module], precision: int = 6) -> str:
+    """The module string in grammar syntax, e.g. `F(1.5)[+F]`."""
+    parts = []
+    for sym, params in modules:
+        if params:
+            parts.append(sym + "(" + ",".join(f"{p:.{precision}g}" for p in params) + ")")
+        else:
+            parts.append(sym)
+    return "".join(parts)
+
+
+class _Rewriter:
+    def __init__(self, grammar: Grammar, rng: np.random.Generator, limits: Limits):
+        self.grammar = grammar
+        self.rng = rng
+        self.limits = limits
+        self.work = 0
+        self.by_symbol: dict[str, list[Production]] = {}
+        for p in grammar.productions:
+            self.by_symbol.setdefault(p.pred.symbol, []).append(p)
+        self.has_context = any(p.left or p.right for p in grammar.productions)
+        # Successors whose arguments are all constants are built once.
+        self.static = {}
+        for p in grammar.productions:
+            for k, succ in enumerate(p.successors):
+                if all(a.const is not None for m in succ for a in m.args):
+                    self.static[(id(p), k)] = [(m.symbol, tuple(a.const for a in m.args))
+                                               for m in succ]
+        ignore = grammar.ignore
+        consider = grammar.consider
+        if consider is not None:
+            self.skip = lambda s: s not in consider and s not in "[]"
+        else:
+            self.skip = lambda s: s in ignore
+
+    # -- context --------------------------------------------------------
+    def _brackets(self, modules: list[Module]) -> list[int]:
+        match = [-1] * len(modules)
+        stack = []
+        for i, (sym, _) in enumerate(modules):
+            if sym == "[":
+                stack.append(i)
+            elif sym == "]" and stack:
+                j = stack.pop()
+                match[i], match[j] = j, i
+        return match
+
+    def _left(self, modules, match, i, patterns, bound: list) -> bool:
+        j = i - 1
+        for pat in reversed(patterns):
+            while j >= 0:
+                sym = modules[j][0]
+                if sym == "]":
+                    j = match[j] - 1
+                    if j < -1:
+                        return False
+                elif sym == "[" or self.skip(sym):
+                    j -= 1
+                else:
+                    break
+            if j < 0:
+                return False
+            sym, params = modules[j]
+            if sym != pat.symbol or len(params) != len(pat.params):
+                return False
+            bound[0:0] = params  # left-context values come first, in order
+            j -= 1
+        return True
+
+    def _right(self, modules, match, i, patterns, bound: list) -> bool:
+        j, n = i + 1, len(modules)
+        for pat in patterns:
+            while j < n:
+                sym = modules[j][0]
+                if sym == "[":
+                    if match[j] < 0:
+                        return False
+                    j = match[j] + 1
+                elif self.skip(sym):
+                    j += 1
+                else:
+                    break
+            if j >= n:
+                return False
+            sym, params = modules[j]
+            if sym == "]" or sym != pat.symbol or len(params) != len(pat.params):
+                return False
+            bound.extend(params)
+            j += 1
+        return True
+
+    # -- one parallel step -------------------------------------------------
+    def step(self, modules: list[Module], iteration: int) -> list[Module]:
+        limits = self.limits
+        self.work += len(modules)
+        if self.work > limits.max_work:
+            raise LimitError(
+                f"{self.grammar.file}: derivation work limit of {limits.max_work} modules "
+                f"reached at iteration {iteration}; lower the iteration count")
+        match = self._brackets(modules) if self.has_context else None
+        out: list[Module] = []
+        append, extend = out.append, out.extend
+        by_symbol, static, rng = self.by_symbol, self.static, self.rng
+        params_total = 0
+        next_check = 4096
+        for i, module in enumerate(modules):
+            prods = by_symbol.get(module[0])
+            if prods is None:
+                append(module)
+            else:
+                for p in prods:
+                    if len(module[1]) != len(p.pred.params):
+                        continue
+                    values = list(module[1])
+                    if p.left and not self._left(modules, match, i, p.left, values):
+                        continue
+                    if p.right and not self._right(modules, match, i, p.right, values):
+                        continue
+                    try:
+                        if p.condition is not None and not p.condition.evaluate(values, rng):
+                            continue
+                        k = 0
+                        if len(p.probabilities) > 1:
+                            r = rng.random()
+                            acc = 0.0
+                            for k, pr in enumerate(p.probabilities):
+                                acc += pr
+                                if r < acc:
+                                    break
+                        built = static.get((id(p), k))
+                        if built is not None:
+                            extend(built)
+                        else:
+                            for m in p.successors[k]:
+                                args = tuple(a.evaluate(values, rng) for a in m.args)
+                                for a in args:
+                                    if not math.isfinite(a):
+                                        raise GrammarError(
+                                            f"module {m.symbol!r} got a non-finite parameter "
+                                            f"({a}) at iteration {iteration}",
+                                            p.file, p.line, 1)
+                                params_total += len(args)
+                                append((m.symbol, args))
+                    except (ArithmeticError, ValueError) as exc:
+                        raise GrammarError(
+                            f"evaluating the production for {p.pred.symbol!r} at iteration "
+                            f"{iteration}: {math_message(exc)}", p.file, p.line, 1) from None
+                    break
+                else:
+                    append(module)
+            if len(out) >= next_check:
+                next_check = len(out) + 4096
+                self._check(len(out), params_total, iteration)
+        self._check(len(out), params_total, iteration)
+        if any(sym == "%" for sym, _ in out):
+            out = _cut(out)
+        return out
+
+    def _check(self, count: int, params: int, iteration: int) -> None:
+        limits = self.limits
+        if count > limits.max_modules:
+            raise LimitError(
+                f"{self.grammar.file}: the derived string exceeds {limits.max_modules} modules "
+                f"at iteration {iteration}; lower the iteration count or raise --max-modules")
+        estimate = count * _BYTES_PER_MODULE + params * _BYTES_PER_PARAM
+        if estimate > limits.max_bytes:
+            raise LimitError(
+                f"{self.grammar.file}: the derived string would need about "
+                f"{estimate / 2**20:.0f} MiB at iteration {iteration} (limit "
+                f"{limits.max_bytes / 2**20:.0f} MiB); lower the iteration count")
+
+
+def _cut(modules: list[Module]) -> list[Module]:
+    """Apply `%`: drop it and everything after it up to the end of its branch."""
+    out: list[Module] = []
+    skip_depth = -1  # bracket depth being erased, -1 when not erasing
+    depth = 0
+    for m in modules:
+        sym = m[0]
+        if skip_depth >= 0:
+            if sym == "[":
+                depth += 1
+            elif sym == "]":
+                if depth == skip_depth:
+                    skip_depth = -1
+                    depth -= 1
+                    out.append(m)
+                    continue
+                depth -= 1
+            continue
+        if sym == "%":
+            skip_depth = depth
+            continue
+        if sym == "[":
+            depth += 1
+        elif sym == "]":
+            depth -= 1
+        out.append(m)
+    return out

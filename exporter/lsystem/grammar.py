@@ -1,0 +1,573 @@
+"""Grammar files (`.lsys`): parsing into a `Grammar`.
+
+The syntax follows *The Algorithmic Beauty of Plants* (ABOP) and cpfg/L-Py
+closely enough that grammars can be pasted from the book; `docs/grammar.md`
+is the reference. Every problem is a `GrammarError` naming file, line and
+column.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import GrammarError
+from .expr import Expr, compile_expr, evaluate_constant
+from .symbols import AT_COMMANDS
+
+Module = tuple[str, tuple[float, ...]]
+
+MAX_FILE_BYTES = 1_000_000
+MAX_ITERATIONS = 1000
+_NAME = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
+_ARROW = re.compile(r"-\((?P<prob>[^()]*)\)->|-->|→|(?<!<)->")
+_RESERVED = set("(),:")
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """A module in a predecessor or context, with formal parameter names."""
+
+    symbol: str
+    params: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class SuccessorModule:
+    symbol: str
+    args: tuple[Expr, ...]
+
+
+@dataclass(frozen=True)
+class Production:
+    left: tuple[Pattern, ...]
+    pred: Pattern
+    right: tuple[Pattern, ...]
+    condition: Expr | None
+    successors: tuple[tuple[SuccessorModule, ...], ...]  # stochastic alternatives
+    probabilities: tuple[float, ...]
+    file: str
+    line: int
+
+    @property
+    def arity(self) -> int:
+        return sum(len(p.params) for p in (*self.left, self.pred, *self.right))
+
+
+@dataclass(frozen=True)
+class PhysicsDefaults:
+    """Tree-wide physics defaults a grammar header may set (SI units).
+
+    density: green wood density, kg/m^3. modulus: Young's modulus, Pa.
+    damping: structural damping ratio of the first mode (dimensionless).
+    cone: joint cone half-angle, degrees. strength: bending moment that breaks
+    a joint, N*m (inf = unbreakable). rupture: modulus of rupture, Pa; when set,
+    joints break at rupture * pi * D^3 / 32. anchor: root-plate anchorage
+    moment, N*m (inf = never uprooted). leaf_size: leaf quad edge, m.
+    leaf_mass: fresh leaf mass per unit area, kg/m^2. drag: wood drag
+    coefficient. leaf_drag: leaf drag coefficient.
+    """
+
+    density: float = 750.0
+    modulus: float = 8.0e9
+    damping: float = 0.05
+    cone: float = 30.0
+    strength: float = math.inf
+    rupture: float = math.inf
+    anchor: float = math.inf
+    leaf_size: float = 0.15
+    leaf_mass: float = 0.2
+    drag: float = 1.2
+    leaf_drag: float = 0.3
+
+
+@dataclass(frozen=True)
+class Grammar:
+    """A parsed grammar. Lengths are in grammar units; `scale` converts them
+    to metres and `width_scale` converts widths (diameters) to metres."""
+
+    name: str
+    file: str
+    source_hash: str
+    axiom: tuple[Module, ...]
+    productions: tuple[Production, ...]
+    iterations: int = 1
+    angle: float = 90.0  # degrees
+    step: float = 1.0  # grammar length units
+    width: float = 0.1  # initial diameter, width units
+    width_factor: float = 0.7  # `!` without argument multiplies width by this
+    seed: int = 0
+    ignore: frozenset[str] = frozenset()  # skipped when matching context
+    consider: frozenset[str] | None = None  # if set, only these count as context
+    tropism: tuple[float, float, float] = (0.0, 0.0, -1.0)  # world, Z up
+    elasticity: float = 0.0
+    scale: float = 1.0  # metres per grammar length unit
+    width_scale: float = 1.0  # metres per grammar width unit
+    leaves: int = 0  # leaf type at the start (0 = none)
+    physics: PhysicsDefaults = field(default_factory=PhysicsDefaults)
+    constants: tuple[tuple[str, float], ...] = ()
+    description: str = ""
+
+
+# ---------------------------------------------------------------------------
+# module strings
+
+
+@dataclass
+class _RawModule:
+    symbol: str
+    col: int  # 0-based column of the symbol in the line
+    args: list[tuple[str, int]]  # (text, 0-based column)
+
+
+def scan_modules(text: str, col0: int, names: tuple[str, ...], err) -> list[_RawModule]:
+    """Split a module string into symbols with raw argument texts.
+
+    `names` are declared multi-character module names (longest first);
+    `@name` is always one module. `err(message, col)` builds the error.
+    """
+    out: list[_RawModule] = []
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c.isspace():
+            i += 1
+            continue
+        if c in "),":
+            raise err(f"unexpected {c!r}", col0 + i)
+        if c == "(":
+            raise err("'(' must follow a module symbol", col0 + i)
+        if c == ":":
+            raise err("unexpected ':' (reserved for conditions and probabilities)", col0 + i)
+        start = i
+        symbol = None
+        if c == "@":
+            m = _NAME.match(text, i + 1)
+            if m:
+                symbol = "@" + m.group()
+                i = m.end()
+        if symbol is None:
+            for name in names:
+                if text.startswith(name, i):
+                    symbol = name
+                    i += len(name)
+                    break
+        if symbol is None:
+            symbol = c
+            i += 1
+        args: list[tuple[str, int]] = []
+        if i < n and text[i] == "(":
+            depth, j, arg_start = 1, i + 1, i + 1
+            while j < n and depth:
+                ch = text[j]
+                if ch == "(":
+                    depth += 1
+                elif ch == ")":
+                    depth -= 1
+                    if depth == 0:
+                        break
+                elif ch == "," and depth == 1:
+                    args.append((text[arg_start:j], col0 + arg_start))
+                    arg_start = j + 1
+                j += 1
+            if depth:
+                raise err(f"unclosed '(' after {symbol!r}", col0 + i)
+            args.append((text[arg_start:j], col0 + arg_start))
+            if len(args) == 1 and not args[0][0].strip():
+                args = []  # "A()" has no parameters
+            i = j + 1
+        if symbol.startswith("@"):
+            counts = AT_COMMANDS.get(symbol)
+            if counts is None:
+                known = ", ".join(sorted(AT_COMMANDS))
+                raise err(f"unknown command {symbol!r} (known: {known})", col0 + start)
+            if len(args) not in counts:
+                want = " or ".join(str(c) for c in counts)
+                raise err(f"{symbol} takes {want} argument(s), got {len(args)}", col0 + start)
+        out.append(_RawModule(symbol, col0 + start, args))
+    return out
+
+
+def _check_brackets(mods: list[_RawModule], err) -> None:
+    depth = 0
+    for m in mods:
+        if m.symbol == "[":
+            depth += 1
+        elif m.symbol == "]":
+            depth -= 1
+            if depth < 0:
+                raise err("']' without a matching '['", m.col)
+    if depth:
+        opening = [m for m in mods if m.symbol == "["]
+        raise err("'[' without a matching ']'", opening[-1].col)
+
+
+# ---------------------------------------------------------------------------
+# the file
+
+
+_HEADER_KEYS = {
+    "axiom": "axiom", "ω": "axiom", "w": "axiom",
+    "iterations": "iterations", "n": "iterations", "derivation length": "iterations",
+    "angle": "angle", "delta": "angle", "δ": "angle",
+    "step": "step", "width": "width", "width factor": "width_factor",
+    "seed": "seed", "ignore": "ignore", "consider": "consider",
+    "module": "modules", "modules": "modules",
+    "tropism": "tropism", "elasticity": "elasticity",
+    "scale": "scale", "width scale": "width_scale",
+    "name": "name", "description": "description", "leaves": "leaves",
+    "density": "density", "modulus": "modulus", "damping": "damping", "cone": "cone",
+    "strength": "strength", "rupture": "rupture", "anchor": "anchor",
+    "leaf size": "leaf_size", "leaf mass": "leaf_mass", "drag": "drag",
+    "leaf drag": "leaf_drag",
+}
+
+# (low, high) allowed values for numeric header settings; None = unbounded.
+_RANGES = {
+    "iterations": (0, MAX_ITERATIONS), "angle": (-360.0, 360.0), "step": (0.0, None),
+    "width": (0.0, None), "width_factor": (0.0, 1.0e3), "seed": (0, 2**63 - 1),
+    "elasticity": (-10.0, 10.0), "scale": (1e-9, 1e9), "width_scale": (1e-9, 1e9),
+    "leaves": (0, 16), "density": (1.0, 5000.0), "modulus": (1e3, 1e12),
+    "damping": (0.0, 2.0), "cone": (0.01, 180.0), "strength": (0.0, math.inf),
+    "rupture": (0.0, math.inf), "anchor": (0.0, math.inf), "leaf_size": (0.0, 10.0),
+    "leaf_mass": (0.0, 10.0), "drag": (0.0, 10.0), "leaf_drag": (0.0, 10.0),
+}
+_INTEGER_KEYS = {"iterations", "seed", "leaves"}
+
+
+def _strip_comment(line: str) -> str:
+    stripped = line.lstrip()
+    if stripped.startswith(("#define", "#include")):
+        body_start = len(line) - len(stripped) + 1
+        cut = line.find("#", body_start)
+    else:
+        cut = line.find("#")
+    slashes = line.find("//")
+    ends = [c for c in (cut, slashes) if c >= 0]
+    if ends:
+        line = line[: min(ends)]
+    return line.rstrip()
+
+
+def load_grammar(path: str | Path) -> Grammar:
+    """Read and parse a grammar file."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise GrammarError(f"cannot read grammar: {exc.strerror}", str(p), 0, 0) from None
+    if len(data) > MAX_FILE_BYTES:
+        raise GrammarError(f"grammar file larger than {MAX_FILE_BYTES} bytes", str(p), 0, 0)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise GrammarError("file is not valid UTF-8", str(p), line, 1) from None
+    return parse_grammar(text, file=str(p), name=p.stem)
+
+
+def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> Grammar:
+    """Parse grammar text. Defines are read first (in order), then settings
+    and productions, so productions may use defines written below them."""
+    if len(text) > MAX_FILE_BYTES:
+        raise GrammarError(f"grammar larger than {MAX_FILE_BYTES} characters", file, 0, 0)
+    if "\x00" in text:
+        line = text[: text.index("\x00")].count("\n") + 1
+        raise GrammarError("NUL character in grammar", file, line, 1)
+    lines = [_strip_comment(raw) for raw in text.splitlines()]
+
+    def err_at(lineno: int):
+        return lambda message, col: GrammarError(message, file, lineno, col + 1)
+
+    constants: dict[str, float] = {}
+    headers: dict[str, tuple[str, int, int]] = {}  # key -> (value text, line, col)
+    production_lines: list[tuple[int, str]] = []
+    for lineno, line in enumerate(lines, start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        indent = len(line) - len(line.lstrip())
+        err = err_at(lineno)
+        if stripped.startswith("#define"):
+            rest = stripped[len("#define"):]
+            m = re.match(r"\s+([A-Za-z_][A-Za-z_0-9]*)\s*(=\s*)?", rest)
+            if not m or not rest[m.end():].strip():
+                raise err("expected '#define NAME VALUE'", indent)
+            cname = m.group(1)
+            if cname.startswith("__"):
+                raise err(f"names starting with '__' are not allowed: {cname!r}", indent + 8)
+            value_col = indent + len("#define") + m.end()
+            constants[cname] = evaluate_constant(rest[m.end():], constants, file=file,
+                                                 line=lineno, col=value_col)
+            continue
+        if stripped.startswith("#include"):
+            raise err("#include is not supported; put everything in one file", indent)
+        if _ARROW.search(line):
+            production_lines.append((lineno, line))
+            continue
+        m = re.match(r"\s*([^:]+?)\s*:(.*)$", line)
+        if not m:
+            raise err("expected a setting 'key: value', '#define NAME VALUE' or a production "
+                      "'predecessor -> successor'", indent)
+        key = re.sub(r"[\s_]+", " ", m.group(1).strip().lower())
+        if key not in _HEADER_KEYS:
+            known = ", ".join(sorted({k for k in _HEADER_KEYS if len(k) > 1 and k.isascii()}))
+            raise err(f"unknown setting {m.group(1).strip()!r} (known: {known})", indent)
+        canonical = _HEADER_KEYS[key]
+        if canonical in headers:
+            raise err(f"setting {canonical!r} given twice (first on line "
+                      f"{headers[canonical][1]})", indent)
+        value = m.group(2)
+        lead = len(value) - len(value.lstrip())
+        headers[canonical] = (value.lstrip(), lineno, m.start(2) + lead)
+
+    settings: dict = {}
+    declared: tuple[str, ...] = ()
+    if "modules" in headers:
+        value, lineno, col = headers["modules"]
+        names = value.split()
+        for nm in names:
+            if not _NAME.fullmatch(nm):
+                raise err_at(lineno)(f"module name {nm!r} must be a letter followed by letters,"
+                                     " digits or '_'", col + value.find(nm))
+        declared = tuple(sorted(set(names), key=len, reverse=True))
+
+    for key, (value, lineno, col) in headers.items():
+        err = err_at(lineno)
+        if key in ("name", "description"):
+            settings[key] = value.strip()
+        elif key in ("ignore", "consider"):
+            mods = scan_modules(value, col, declared, err)
+            if any(m.args for m in mods):
+                raise err(f"{key} lists symbols without parameters", col)
+            settings[key] = frozenset(m.symbol for m in mods)
+        elif key == "tropism":
+            parts = _split_top(value, col)
+            if len(parts) != 3:
+                raise err("tropism needs three numbers: x, y, z (world frame, Z up)", col)
+            vec = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
+                        for t, c in parts)
+            if math.hypot(*vec) == 0:
+                raise err("tropism vector must not be zero", col)
+            settings[key] = vec
+        elif key in ("axiom", "modules"):
+            continue
+        else:
+            v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
+            lo, hi = _RANGES[key]
+            if (lo is not None and v < lo) or (hi is not None and v > hi):
+                rng = f"[{lo}, {hi if hi is not None else 'inf'}]"
+                raise err(f"{key} = {v:g} is out of range {rng}", col)
+            if key in _INTEGER_KEYS:
+                if v != int(v):
+                    raise err(f"{key} must be a whole number, got {v:g}", col)
+                v = int(v)
+            settings[key] = v
+    if "ignore" in settings and "consider" in settings:
+        _, lineno, col = headers["consider"]
+        raise err_at(lineno)("use either 'ignore' or 'consider', not both", col)
+
+    if "axiom" not in headers:
+        raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
+    value, lineno, col = headers["axiom"]
+    err = err_at(lineno)
+    raw = scan_modules(value, col, declared, err)
+    if not raw:
+        raise err("axiom is empty", col)
+    _check_brackets(raw, err)
+    axiom = []
+    for m in raw:
+        params = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
+                       for t, c in m.args)
+        axiom.append((m.symbol, params))
+
+    productions = _parse_productions(production_lines, constants, declared, file)
+
+    physics_keys = set(PhysicsDefaults.__dataclass_fields__)
+    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
+    grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
+                    "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
+                    "description"}
+    kwargs = {k: v for k, v in settings.items() if k in grammar_keys}
+    if "width_scale" not in kwargs and "scale" in kwargs:
+        kwargs["width_scale"] = kwargs["scale"]
+    return Grammar(
+        name=settings.get("name") or name,
+        file=file,
+        source_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        axiom=tuple(axiom),
+        productions=productions,
+        physics=physics,
+        constants=tuple(sorted(constants.items())),
+        **kwargs,
+    )
+
+
+def _split_top(text: str, col0: int) -> list[tuple[str, int]]:
+    """Split on commas (or whitespace when there are none) outside parentheses."""
+    parts, depth, start = [], 0, 0
+    if "," not in text:
+        return [(m.group(), col0 + m.start()) for m in re.finditer(r"\S+", text)]
+    for i, ch in enumerate(text):
+        if ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            parts.append((text[start:i], col0 + start))
+            start = i + 1
+    parts.append((text[start:], col0 + start))
+    return parts
+
+
+def _find_top(text: str, chars: str, start: int = 0) -> int:
+    depth = 0
+    for i in range(start, len(text)):
+        ch = text[i]
+        if ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+        elif depth == 0 and ch in chars:
+            return i
+    return -1
+
+
+def _rfind_top(text: str, ch: str) -> int:
+    depth = 0
+    for i in range(len(text) - 1, -1, -1):
+        c = text[i]
+        if c == ")":
+            depth += 1
+        elif c == "(":
+            depth -= 1
+        elif depth == 0 and c == ch:
+            return i
+    return -1
+
+
+def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, ...]:
+    if text.strip() == "*":
+        return ()
+    out = []
+    for m in scan_modules(text, col0, declared, err):
+        names = []
+        for arg, c in m.args:
+            a = arg.strip()
+            if not _NAME.fullmatch(a):
+                raise err(f"{what} parameters must be names, got {a!r}", c)
+            if a.startswith("__"):
+                raise err(f"names starting with '__' are not allowed: {a!r}", c)
+            names.append(a)
+        out.append(Pattern(m.symbol, tuple(names)))
+    return tuple(out)
+
+
+def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float],
+                       declared: tuple[str, ...], file: str) -> tuple[Production, ...]:
+    parsed = []  # (key, Production-ish pieces, prob or None, line)
+    for lineno, line in lines:
+        def err(message, col, _l=lineno):
+            return GrammarError(message, file, _l, col + 1)
+
+        m = _ARROW.search(line)
+        lhs, rhs, rhs_col = line[: m.start()], line[m.end():], m.end()
+        prob_text = m.group("prob")
+        prob = None
+        if prob_text is not None:
+            prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
+                                     col=m.start("prob"))
+        else:
+            colon = _rfind_top(rhs, ":")
+            if colon >= 0:
+                prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
+                                         col=rhs_col + colon + 1)
+                rhs = rhs[:colon]
+        if prob is not None and not 0.0 <= prob <= 1.0:
+            raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
+
+        colon = _find_top(lhs, ":")
+        cond_text, cond_col = None, 0
+        if colon >= 0:
+            cond_text, cond_col = lhs[colon + 1:], colon + 1
+            lhs = lhs[:colon]
+        if not lhs.strip():
+            raise err("production has no predecessor", 0)
+        lt = _find_top(lhs, "<")
+        gt = _find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
+        if lt >= 0 and _find_top(lhs, "<", lt + 1) >= 0:
+            raise err("more than one '<' in predecessor", _find_top(lhs, "<", lt + 1))
+        if gt >= 0 and _find_top(lhs, ">", gt + 1) >= 0:
+            raise err("more than one '>' in predecessor", _find_top(lhs, ">", gt + 1))
+        pred_start = lt + 1 if lt >= 0 else 0
+        pred_end = gt if gt >= 0 else len(lhs)
+        left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
+        right = _patterns(lhs[gt + 1:], gt + 1, declared, err, "context") if gt >= 0 else ()
+        pred = _patterns(lhs[pred_start:pred_end], pred_start, declared, err, "predecessor")
+        if len(pred) != 1:
+            raise err("the strict predecessor must be exactly one module"
+                      f" (found {len(pred)})", pred_start)
+        for ctx, where in ((left, "left"), (right, "right")):
+            if any(p.symbol in "[]" for p in ctx):
+                raise err(f"brackets in the {where} context are not supported", 0)
+
+        names: dict[str, int] = {}
+        for p in (*left, pred[0], *right):
+            for nm in p.params:
+                if nm in names:
+                    raise err(f"parameter {nm!r} is bound twice in the predecessor", 0)
+                names[nm] = len(names)
+
+        condition = None
+        if cond_text is not None:
+            if not cond_text.strip():
+                raise err("empty condition after ':'", cond_col)
+            condition = compile_expr(cond_text, names, constants, file=file, line=lineno,
+                                     col=cond_col)
+
+        mods = scan_modules(rhs, rhs_col, declared, err)
+        if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
+            mods = []
+        _check_brackets(mods, err)
+        successor = tuple(
+            SuccessorModule(mod.symbol, tuple(
+                compile_expr(t, names, constants, file=file, line=lineno, col=c)
+                for t, c in mod.args))
+            for mod in mods
+        )
+        key = (left, pred[0], right, cond_text.strip() if cond_text else None)
+        parsed.append((key, left, pred[0], right, condition, successor, prob, lineno))
+
+    # Group stochastic alternatives (same predecessor, contexts and condition).
+    productions: list[Production] = []
+    groups: dict[tuple, list] = {}
+    order: list[tuple] = []
+    for item in parsed:
+        key, prob = item[0], item[6]
+        if prob is None:
+            order.append(("single", len(order), item))
+        else:
+            if key not in groups:
+                groups[key] = []
+                order.append(("group", key, None))
+            groups[key].append(item)
+    for kind, key, item in order:
+        if kind == "single":
+            _, left, pred, right, cond, succ, _, lineno = item
+            productions.append(Production(left, pred, right, cond, (succ,), (1.0,), file, lineno))
+            continue
+        items = groups[key]
+        total = sum(it[6] for it in items)
+        if abs(total - 1.0) > 1e-3:
+            lines_txt = ", ".join(str(it[7]) for it in items)
+            raise GrammarError(
+                f"probabilities for {key[1].symbol!r} (lines {lines_txt}) sum to {total:g};"
+                " they must sum to 1", file, items[0][7], 1)
+        _, left, pred, right, cond, _, _, lineno = items[0]
+        productions.append(Production(
+            left, pred, right, cond, tuple(it[5] for it in items),
+            tuple(it[6] / total for it in items), file, lineno))
+    return tuple(productions)

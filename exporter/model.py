@@ -1,0 +1,106 @@
+"""TreeModel: the hierarchical tree the turtle draws.
+
+World frame: metres, Z up, the tree's base at the origin. A limb (trunk or
+branch) is an ordered list of points; segment k of a limb joins its points k
+and k+1. A child limb starts at point `attach` of its parent limb. Segments
+are stored in flat arrays in creation order, so a segment's parent always
+comes before it.
+
+Per-segment attributes (units):
+    width      diameter, m
+    density    green wood density, kg/m^3
+    modulus    Young's modulus, Pa
+    ei         bending stiffness override, N*m^2 (NaN = modulus * pi D^4 / 64)
+    stiffness  joint stiffness override, N*m/rad (NaN = derived by the rig)
+    damping    structural damping ratio of the tree's first mode
+    cone       joint cone half-angle, rad
+    strength   bending moment that breaks the joint at the segment's base, N*m
+               (inf = unbreakable); already includes any modulus of rupture
+    leaf       leaf type (0 = none); leaf_size: leaf quad edge, m
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Limb:
+    """A trunk or branch: global point and segment indices, base first."""
+
+    parent: int  # parent limb, -1 for a root limb (attached to the ground)
+    attach: int  # index into the parent's `points` where this limb starts; -1 for roots
+    points: list[int] = field(default_factory=list)
+    segments: list[int] = field(default_factory=list)
+    path: str = ""  # e.g. "trunk/2/1": 1-based child numbers from the root
+
+
+@dataclass
+class TreeModel:
+    name: str
+    points: np.ndarray  # (P, 3) m
+    seg_start: np.ndarray  # (S,) point index
+    seg_end: np.ndarray  # (S,) point index
+    seg_limb: np.ndarray  # (S,) limb index
+    seg_parent: np.ndarray  # (S,) parent segment, -1 = ground
+    width: np.ndarray  # (S,) m
+    density: np.ndarray  # (S,) kg/m^3
+    modulus: np.ndarray  # (S,) Pa
+    ei: np.ndarray  # (S,) N*m^2 or NaN
+    stiffness: np.ndarray  # (S,) N*m/rad or NaN
+    damping: np.ndarray  # (S,) ratio
+    cone: np.ndarray  # (S,) rad
+    strength: np.ndarray  # (S,) N*m, inf = unbreakable
+    leaf: np.ndarray  # (S,) int
+    leaf_size: np.ndarray  # (S,) m
+    limbs: list[Limb]
+    anchor: float = float("inf")  # root-plate anchorage moment, N*m
+    leaf_mass: float = 0.2  # fresh leaf mass per area, kg/m^2
+    drag: float = 1.2  # wood drag coefficient
+    leaf_drag: float = 0.3  # leaf drag coefficient
+    source: dict = field(default_factory=dict)  # grammar name, hash, seed, iterations
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.seg_start.shape[0])
+
+    @property
+    def seg_vector(self) -> np.ndarray:
+        return self.points[self.seg_end] - self.points[self.seg_start]
+
+    @property
+    def seg_length(self) -> np.ndarray:
+        return np.linalg.norm(self.seg_vector, axis=1)
+
+    @property
+    def height(self) -> float:
+        return float(self.points[:, 2].max() - min(0.0, self.points[:, 2].min()))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.points.min(axis=0), self.points.max(axis=0)
+
+    def wood_mass(self) -> float:
+        """Total wood mass (solid cylinders), kg."""
+        volume = np.pi / 4 * self.width**2 * self.seg_length
+        return float(np.sum(self.density * volume))
+
+    def segment_paths(self) -> list[str]:
+        """A readable name per segment: limb path and index, e.g. 'trunk/2/1:3'."""
+        names = [""] * self.n_segments
+        for limb in self.limbs:
+            for k, s in enumerate(limb.segments):
+                names[s] = f"{limb.path}:{k}"
+        return names
+
+    def dbh(self) -> float:
+        """Stem diameter at breast height (1.3 m) of the first root limb, m;
+        the base diameter when the trunk is shorter than 1.3 m."""
+        trunk = self.limbs[0]
+        for s in trunk.segments:
+            z0 = self.points[self.seg_start[s], 2]
+            z1 = self.points[self.seg_end[s], 2]
+            if min(z0, z1) <= 1.3 <= max(z0, z1):
+                return float(self.width[s])
+        return float(self.width[trunk.segments[0]])

@@ -1,0 +1,12 @@
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+GRAMMARS = ROOT / "grammars"
+PRESETS = ROOT / "presets"
+
+
+@pytest.fixture
+def root() -> Path:
+    return ROOT
