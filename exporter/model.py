@@ -94,6 +94,25 @@ class TreeModel:
                 names[s] = f"{limb.path}:{k}"
         return names
 
+    def main_stem(self) -> list[int]:
+        """Segments of the main stem from the ground up: the first root limb,
+        continued at each fork by the widest limb leaving its last point if it
+        is at least half as wide (a leader, not a side branch or frond)."""
+        limb = 0
+        stem: list[int] = []
+        while True:
+            segs = self.limbs[limb].segments
+            stem.extend(segs)
+            last = len(self.limbs[limb].points) - 1
+            forks = [i for i, child in enumerate(self.limbs)
+                     if child.parent == limb and child.attach == last and child.segments]
+            if not forks:
+                return stem
+            best = max(forks, key=lambda i: (self.width[self.limbs[i].segments[0]], -i))
+            if self.width[self.limbs[best].segments[0]] < 0.5 * self.width[segs[-1]]:
+                return stem
+            limb = best
+
     def dbh(self) -> float:
         """Stem diameter at breast height (1.3 m) of the first root limb, m;
         the base diameter when the trunk is shorter than 1.3 m."""
@@ -104,3 +123,16 @@ class TreeModel:
             if min(z0, z1) <= 1.3 <= max(z0, z1):
                 return float(self.width[s])
         return float(self.width[trunk.segments[0]])
+
+
+def placed(model: TreeModel, position: tuple[float, float], rotation_deg: float) -> TreeModel:
+    """A copy of `model` rotated about Z by `rotation_deg` degrees and moved
+    to `position` (x, y) m on the ground."""
+    import dataclasses
+    import math
+
+    a = math.radians(rotation_deg)
+    c, s = math.cos(a), math.sin(a)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    pts = model.points @ rot.T + np.array([position[0], position[1], 0.0])
+    return dataclasses.replace(model, points=pts)

@@ -1,0 +1,187 @@
+"""Bake: baked per-segment world transforms, the one input of every exporter
+and of `diff`.
+
+For each tree: rest geometry (enough to build meshes without the grammar),
+and per frame and segment the world position of the segment's base point
+(m, float32) and its rotation relative to the rest pose (unit quaternion
+x y z w, float32). A vertex at rest position v on segment s is posed at
+    position[f, s] + R(rotation[f, s]) (v - rest_base[s]).
+A tree that nothing moved has one frame. Projectiles are `objects`.
+
+Saved as `.npz` written with fixed zip timestamps, so the same bake gives
+the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .fileio import atomic_path
+
+FORMAT_VERSION = 1
+
+
+@dataclass
+class TreeBake:
+    name: str
+    points: np.ndarray  # (P, 3) rest, world
+    seg_start: np.ndarray  # (S,)
+    seg_end: np.ndarray  # (S,)
+    seg_parent: np.ndarray  # (S,) -1 = ground
+    seg_limb: np.ndarray  # (S,)
+    width: np.ndarray  # (S,) m
+    leaf: np.ndarray  # (S,)
+    leaf_size: np.ndarray  # (S,) m
+    limb_parent: np.ndarray  # (L,)
+    limb_attach: np.ndarray  # (L,) point index in the parent limb where it starts
+    limb_points: list[np.ndarray]  # per limb: global point indices, base first
+    paths: list[str]  # (S,) "trunk/2/1:3"
+    positions: np.ndarray  # (F, S, 3) float32, segment base
+    rotations: np.ndarray  # (F, S, 4) float32, x y z w
+    info: dict = field(default_factory=dict)  # grammar, hash, seed, events, ...
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.seg_start.shape[0])
+
+    @property
+    def rest_base(self) -> np.ndarray:
+        return self.points[self.seg_start]
+
+    @property
+    def static(self) -> bool:
+        return self.positions.shape[0] == 1
+
+    @property
+    def height(self) -> float:
+        return float(self.points[:, 2].max() - min(0.0, self.points[:, 2].min()))
+
+
+@dataclass
+class ObjectsBake:
+    shapes: list[str]
+    sizes: np.ndarray  # (P,) m
+    positions: np.ndarray  # (F, P, 3)
+    rotations: np.ndarray  # (F, P, 4) x y z w
+
+
+@dataclass
+class Bake:
+    times: np.ndarray  # (F,) s
+    trees: list[TreeBake]
+    meta: dict
+    objects: ObjectsBake | None = None
+
+    @property
+    def fps(self) -> float:
+        return float(self.meta.get("fps", 24.0))
+
+    def frame(self, tree: TreeBake, f: int) -> int:
+        """Index into a tree's frames (static trees have only frame 0)."""
+        return 0 if tree.static else f
+
+
+def tree_bake_from_model(model, positions: np.ndarray, rotations: np.ndarray,
+                         info: dict) -> TreeBake:
+    return TreeBake(
+        name=model.name, points=model.points.copy(), seg_start=model.seg_start.copy(),
+        seg_end=model.seg_end.copy(), seg_parent=model.seg_parent.copy(),
+        seg_limb=model.seg_limb.copy(), width=model.width.copy(), leaf=model.leaf.copy(),
+        leaf_size=model.leaf_size.copy(),
+        limb_parent=np.asarray([limb.parent for limb in model.limbs], dtype=np.int64),
+        limb_attach=np.asarray([limb.attach for limb in model.limbs], dtype=np.int64),
+        limb_points=[np.asarray(limb.points, dtype=np.int64) for limb in model.limbs],
+        paths=model.segment_paths(),
+        positions=positions.astype(np.float32), rotations=rotations.astype(np.float32),
+        info=info)
+
+
+# ---------------------------------------------------------------------------
+# files
+
+_FIXED_TIME = (1980, 1, 1, 0, 0, 0)
+
+
+def _add(zf: zipfile.ZipFile, name: str, array: np.ndarray) -> None:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
+    info = zipfile.ZipInfo(name + ".npy", date_time=_FIXED_TIME)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16
+    zf.writestr(info, buf.getvalue())
+
+
+def _json_array(obj) -> np.ndarray:
+    return np.frombuffer(json.dumps(obj, sort_keys=True).encode("utf-8"), dtype=np.uint8)
+
+
+def save_bake(bake: Bake, path: str | Path) -> Path:
+    """Write `bake` atomically; identical bakes give identical bytes."""
+    with atomic_path(path) as tmp:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            meta = dict(bake.meta, format_version=FORMAT_VERSION, trees=len(bake.trees))
+            _add(zf, "meta", _json_array(meta))
+            _add(zf, "times", bake.times.astype(np.float64))
+            for i, t in enumerate(bake.trees):
+                p = f"tree{i}."
+                _add(zf, p + "info", _json_array(dict(t.info, name=t.name, paths=t.paths)))
+                for key in ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width",
+                            "leaf", "leaf_size", "limb_parent", "limb_attach", "positions",
+                            "rotations"):
+                    _add(zf, p + key, getattr(t, key))
+                lengths = np.asarray([len(lp) for lp in t.limb_points], dtype=np.int64)
+                flat = np.concatenate(t.limb_points) if t.limb_points else np.zeros(0, np.int64)
+                _add(zf, p + "limb_point_counts", lengths)
+                _add(zf, p + "limb_points", flat)
+            if bake.objects is not None:
+                o = bake.objects
+                _add(zf, "objects.info", _json_array({"shapes": o.shapes}))
+                _add(zf, "objects.sizes", o.sizes)
+                _add(zf, "objects.positions", o.positions.astype(np.float32))
+                _add(zf, "objects.rotations", o.rotations.astype(np.float32))
+    return Path(path)
+
+
+def _json(data: np.ndarray):
+    return json.loads(bytes(data).decode("utf-8"))
+
+
+def load_bake(path: str | Path) -> Bake:
+    p = Path(path)
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            meta = _json(z["meta"])
+            if meta.get("format_version") != FORMAT_VERSION:
+                raise InputError(f"{p}: bake format {meta.get('format_version')} is not "
+                                 f"supported (expected {FORMAT_VERSION})")
+            trees = []
+            for i in range(meta["trees"]):
+                pre = f"tree{i}."
+                info = _json(z[pre + "info"])
+                counts = z[pre + "limb_point_counts"]
+                flat = z[pre + "limb_points"]
+                splits = np.cumsum(counts)[:-1]
+                trees.append(TreeBake(
+                    name=info.pop("name"), paths=info.pop("paths"),
+                    limb_points=list(np.split(flat, splits)) if len(counts) else [],
+                    info=info,
+                    **{k: z[pre + k] for k in ("points", "seg_start", "seg_end", "seg_parent",
+                                                "seg_limb", "width", "leaf", "leaf_size",
+                                                "limb_parent", "limb_attach", "positions",
+                                                "rotations")}))
+            objects = None
+            if "objects.info" in z:
+                objects = ObjectsBake(_json(z["objects.info"])["shapes"], z["objects.sizes"],
+                                      z["objects.positions"], z["objects.rotations"])
+            return Bake(z["times"], trees, meta, objects)
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{p}: not a readable treebake bake ({exc})") from None

@@ -1,0 +1,353 @@
+"""Force fields, evaluated in bulk on arrays of points and velocities.
+
+All SI: positions m, velocities m/s, forces N, times s. World frame Z up.
+Sources of the models and constants: docs/physics-sources.md.
+
+- Wind: mean speed with a power-law profile, plus turbulence synthesised from
+  the IEC 61400-1 Kaimal spectra (u, v, w components) by random-phase inverse
+  FFT from a seeded generator, advected as frozen turbulence (Taylor) so that
+  gusts sweep downwind through a forest; crosswind lanes one lateral length
+  scale apart carry independent series, blended with cos/sin weights (which
+  keep the variance).
+- Drag: cross-flow drag on wood, 0.5*rho*Cd*D*l*|u_n|*u_n with the velocity
+  of the air relative to the bone (so motion is damped by the air), and
+  foliage drag with Vogel reconfiguration (Cd*A falls as (|u|/u0)^b above
+  u0, streamlining).
+- Explosion: Friedlander waveform with Kinney-Graham peak overpressure and
+  positive-phase duration for a TNT-equivalent charge (Hopkinson-Cranz
+  scaled distance), loading bones through the blast's dynamic pressure and a
+  short diffraction (overpressure) pulse.
+- Vortex: a moving combined Rankine vortex with radial inflow and updraft; it
+  adds to the wind and loads trees through the same drag law.
+- Attractor: an acceleration field toward a point, 1/r^2 outside a core.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+AIR_DENSITY = 1.2  # kg/m^3
+SOUND_SPEED = 340.0  # m/s
+ATMOSPHERE = 101_325.0  # Pa
+
+
+# ---------------------------------------------------------------------------
+# wind
+
+
+def kaimal_spectrum(n: np.ndarray, sigma: float, length: float, mean: float) -> np.ndarray:
+    """One-sided Kaimal spectrum S(n) (m^2/s^2 per Hz), IEC 61400-1 form:
+    n*S/sigma^2 = (4*n*L/U) / (1 + 6*n*L/U)^(5/3)."""
+    x = n * length / mean
+    return sigma**2 * (4 * length / mean) / (1 + 6 * x) ** (5.0 / 3.0)
+
+
+def synthesize(rng: np.random.Generator, count: int, dt: float, sigma: float, length: float,
+               mean: float) -> np.ndarray:
+    """A zero-mean Gaussian series of `count` samples at spacing `dt` with the
+    Kaimal spectrum, by random-phase inverse FFT (periodic over count*dt)."""
+    freqs = np.fft.rfftfreq(count, dt)
+    spec = np.zeros_like(freqs)
+    spec[1:] = kaimal_spectrum(freqs[1:], sigma, length, mean)
+    df = 1.0 / (count * dt)
+    amp = np.sqrt(spec * df / 2.0) * count  # rfft convention: var = sum over +-f
+    phases = rng.uniform(0, 2 * np.pi, len(freqs))
+    coeffs = amp * np.exp(1j * phases)
+    coeffs[0] = 0.0
+    if count % 2 == 0:
+        coeffs[-1] = coeffs[-1].real  # the Nyquist term must be real
+    series = np.fft.irfft(coeffs, count)
+    return series
+
+
+@dataclass
+class Wind:
+    """Mean wind `speed` (m/s) at `reference_height` (m) blowing toward
+    `direction` (unit horizontal vector), power-law `shear` exponent, and
+    turbulence of intensity `turbulence` (sigma_u / U) with longitudinal
+    length scale `length_scale` (m); sigma_v = 0.8 sigma_u, sigma_w =
+    0.5 sigma_u, L_v = L_u / 3, L_w = L_u / 12 (IEC 61400-1 ratios)."""
+
+    speed: float
+    direction: np.ndarray
+    reference_height: float = 10.0
+    shear: float = 0.14
+    turbulence: float = 0.0
+    length_scale: float = 50.0
+    start: float = 0.0  # s, wind ramps up over `ramp` seconds from here
+    ramp: float = 2.0
+    end: float = math.inf  # s, wind ramps down over `ramp` seconds from here
+
+    def __post_init__(self):
+        self.direction = np.asarray(self.direction, dtype=float)
+        self.direction = self.direction / np.linalg.norm(self.direction)
+        self.cross = np.array([-self.direction[1], self.direction[0], 0.0])
+        self._series = None
+
+    def prepare(self, rng: np.random.Generator, duration: float, extent: np.ndarray,
+                dt: float = 0.05) -> None:
+        """Synthesise the turbulence for a scene lasting `duration` s over the
+        horizontal box `extent` = ((xmin, ymin), (xmax, ymax)) m."""
+        if self.turbulence <= 0 or self.speed <= 0:
+            return
+        lo, hi = np.asarray(extent, dtype=float)
+        corners = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], lo[1]], [hi[0], hi[1]]])
+        along = corners @ self.direction[:2]
+        across = corners @ self.cross[:2]
+        self._along0 = float(along.min())
+        travel = (along.max() - along.min()) / self.speed
+        count = int(math.ceil((duration + travel + 10.0) / dt))
+        count += count % 2
+        lateral = self.length_scale / 3
+        self._cross0 = float(across.min())
+        self._lane = lateral
+        lanes = int(math.ceil((across.max() - across.min()) / lateral)) + 2
+        sigma_u = self.turbulence * self.speed
+        comps = ((sigma_u, self.length_scale), (0.8 * sigma_u, self.length_scale / 3),
+                 (0.5 * sigma_u, self.length_scale / 12))
+        self._series = np.stack([
+            np.stack([synthesize(rng, count, dt, s, length, self.speed) for s, length in comps],
+                     axis=-1)
+            for _ in range(lanes)])  # (lanes, count, 3)
+        self._dt = dt
+
+    def mean_speed(self, z: np.ndarray) -> np.ndarray:
+        z = np.maximum(z, 0.5)
+        return self.speed * (z / self.reference_height) ** self.shear
+
+    def ramp_factor(self, t: float) -> float:
+        """0 before `start` and after `end` + `ramp`, 1 in between, with
+        smoothstep ramps (no jerk)."""
+        if t <= self.start or t >= self.end + self.ramp:
+            return 0.0
+        if self.ramp <= 0:
+            return 1.0
+        x = min(1.0, (t - self.start) / self.ramp, (self.end + self.ramp - t) / self.ramp)
+        return x * x * (3 - 2 * x)
+
+    def velocity(self, points: np.ndarray, t: float) -> np.ndarray:
+        """Air velocity (m/s) at `points` (N, 3) at time t."""
+        scale = self.ramp_factor(t)
+        if scale == 0.0:
+            return np.zeros_like(points)
+        u = self.mean_speed(points[:, 2])[:, None] * self.direction
+        if self._series is not None:
+            along = points @ self.direction - self._along0
+            tau = (t + 5.0) - along / self.speed  # frozen turbulence: gusts move downwind
+            pos = tau / self._dt
+            i0 = np.floor(pos).astype(np.int64)
+            w = (pos - i0)[:, None]
+            count = self._series.shape[1]
+            i0 %= count
+            i1 = (i0 + 1) % count
+            lane_pos = (points @ self.cross - self._cross0) / self._lane
+            l0 = np.clip(np.floor(lane_pos).astype(np.int64), 0, self._series.shape[0] - 2)
+            # independent lanes blended with cos/sin weights, which keeps the
+            # variance (linear weights would lower it by up to half between lanes)
+            lw = np.clip(lane_pos - l0, 0.0, 1.0)[:, None] * (np.pi / 2)
+            s = self._series
+            fluct = (np.cos(lw) * ((1 - w) * s[l0, i0] + w * s[l0, i1])
+                     + np.sin(lw) * ((1 - w) * s[l0 + 1, i0] + w * s[l0 + 1, i1]))
+            u = u + (fluct[:, 0:1] * self.direction + fluct[:, 1:2] * self.cross
+                     + fluct[:, 2:3] * np.array([0.0, 0.0, 1.0]))
+        return scale * u
+
+
+# ---------------------------------------------------------------------------
+# drag
+
+
+def drag(air: np.ndarray, vel: np.ndarray, axis: np.ndarray, wood_area: np.ndarray,
+         leaf_area: np.ndarray, cd_wood: float, cd_leaf: float,
+         vogel: float = -0.7, vogel_speed: float = 4.0) -> np.ndarray:
+    """Aerodynamic force (N) on bones: cross-flow drag on wood
+    0.5*rho*Cd*A*|u_n|*u_n with u_n the relative air velocity normal to the
+    bone axis, plus foliage drag 0.5*rho*Cd*A*|u|*u*r(|u|) with Vogel
+    reconfiguration r = (|u|/u0)^b above u0 (b < 0)."""
+    rel = air - vel
+    along = (rel * axis).sum(1, keepdims=True)
+    normal = rel - along * axis
+    speed_n = np.linalg.norm(normal, axis=1, keepdims=True)
+    force = (0.5 * AIR_DENSITY * cd_wood) * wood_area[:, None] * speed_n * normal
+    if np.any(leaf_area > 0):
+        speed = np.linalg.norm(rel, axis=1, keepdims=True)
+        recon = np.where(speed > vogel_speed,
+                         (np.maximum(speed, vogel_speed) / vogel_speed) ** vogel, 1.0)
+        force += (0.5 * AIR_DENSITY * cd_leaf) * leaf_area[:, None] * speed * recon * rel
+    return force
+
+
+def frontal_area(axis: np.ndarray, direction: np.ndarray, wood_area: np.ndarray,
+                 leaf_area: np.ndarray) -> np.ndarray:
+    """Area (m^2) a bone presents to a flow along unit `direction` (N, 3)."""
+    cos = np.abs((axis * direction).sum(1))
+    sin = np.sqrt(np.clip(1 - cos * cos, 0.0, 1.0))
+    return wood_area * sin + 0.5 * leaf_area
+
+
+# ---------------------------------------------------------------------------
+# explosion
+
+
+def kinney_graham_overpressure(z: np.ndarray) -> np.ndarray:
+    """Peak side-on overpressure ratio p_s/p_a for a TNT free-air burst at
+    scaled distance z (m/kg^(1/3)), Kinney & Graham (1985)."""
+    z = np.maximum(z, 0.05)
+    num = 808.0 * (1 + (z / 4.5) ** 2)
+    den = np.sqrt((1 + (z / 0.048) ** 2) * (1 + (z / 0.32) ** 2) * (1 + (z / 1.35) ** 2))
+    return num / den
+
+
+def kinney_graham_duration(z: np.ndarray, charge: float) -> np.ndarray:
+    """Positive-phase duration (s) at scaled distance z for `charge` kg TNT,
+    Kinney & Graham (1985): t_d / W^(1/3) in ms."""
+    z = np.maximum(z, 0.05)
+    ms = 980.0 * (1 + (z / 0.54) ** 10) / ((1 + (z / 0.02) ** 3) * (1 + (z / 0.74) ** 6)
+                                          * np.sqrt(1 + (z / 6.9) ** 2))
+    return ms * 1e-3 * charge ** (1.0 / 3.0)
+
+
+@dataclass
+class Explosion:
+    """A free-air burst of `charge` kg TNT equivalent at `position` (m) at
+    time `time` (s)."""
+
+    position: np.ndarray
+    time: float
+    charge: float
+    decay: float = 1.5  # Friedlander decay coefficient (dimensionless)
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=float)
+
+    def loads(self, points: np.ndarray, t: float):
+        """Overpressure p (Pa), dynamic pressure q (Pa) and unit radial
+        direction at `points` at time t."""
+        r_vec = points - self.position
+        r = np.maximum(np.linalg.norm(r_vec, axis=1), 1e-3)
+        direction = r_vec / r[:, None]
+        w13 = self.charge ** (1.0 / 3.0)
+        z = r / w13
+        ps = kinney_graham_overpressure(z) * ATMOSPHERE
+        td = kinney_graham_duration(z, self.charge)
+        mach = np.sqrt(1 + 6.0 / 7.0 * ps / ATMOSPHERE)  # Rankine-Hugoniot shock Mach
+        arrival = self.time + r / (SOUND_SPEED * mach)
+        tau = t - arrival
+        active = (tau >= 0) & (tau <= td)
+        x = np.where(active, tau / td, 1.0)
+        wave = np.where(active, (1 - x) * np.exp(-self.decay * x), 0.0)
+        p = ps * wave
+        qs = 2.5 * ps**2 / (7 * ATMOSPHERE + ps)
+        q = qs * wave**2
+        return p, q, direction, arrival
+
+    def force(self, points: np.ndarray, t: float, axis: np.ndarray, wood_area: np.ndarray,
+              leaf_area: np.ndarray, diameter: np.ndarray, cd: float) -> np.ndarray:
+        """Blast force (N): drag of the dynamic pressure Cd*q*A plus the
+        overpressure's diffraction pulse p*A, which clears in about three
+        transit times of the member (3*D/c)."""
+        p, q, direction, arrival = self.loads(points, t)
+        area = frontal_area(axis, direction, wood_area, leaf_area)
+        clearing = np.exp(-np.maximum(t - arrival, 0.0) / np.maximum(3 * diameter / SOUND_SPEED,
+                                                                      1e-5))
+        return ((cd * q + p * clearing) * area)[:, None] * direction
+
+    def reach(self, threshold: float = 500.0) -> float:
+        """Distance (m) beyond which the peak overpressure is below
+        `threshold` Pa (used to skip trees the blast cannot move)."""
+        lo, hi = 0.01, 1e5
+        w13 = self.charge ** (1.0 / 3.0)
+        for _ in range(60):
+            mid = math.sqrt(lo * hi)
+            if kinney_graham_overpressure(np.array([mid / w13]))[0] * ATMOSPHERE > threshold:
+                lo = mid
+            else:
+                hi = mid
+        return hi
+
+
+# ---------------------------------------------------------------------------
+# vortex and attractor
+
+
+@dataclass
+class Vortex:
+    """A combined Rankine vortex (tornado) moving from `start` (x, y, m) with
+    `velocity` (vx, vy, m/s), from `time` to `end` (s). Tangential speed
+    peaks at `max_speed` (m/s) at `core_radius` (m); radial inflow is
+    `inflow` x tangential speed outside the core, updraft `updraft` x max
+    speed inside it. Counter-clockwise seen from above unless `clockwise`."""
+
+    start: np.ndarray
+    velocity: np.ndarray
+    max_speed: float
+    core_radius: float
+    time: float = 0.0
+    end: float = math.inf
+    inflow: float = 0.5
+    updraft: float = 0.5
+    clockwise: bool = False
+
+    def __post_init__(self):
+        self.start = np.asarray(self.start, dtype=float)[:2]
+        self.velocity = np.asarray(self.velocity, dtype=float)[:2]
+
+    def centre(self, t: float) -> np.ndarray:
+        return self.start + self.velocity * (min(max(t, self.time), self.end) - self.time)
+
+    def air_velocity(self, points: np.ndarray, t: float) -> np.ndarray:
+        if t < self.time or t > self.end:
+            return np.zeros_like(points)
+        d = points[:, :2] - self.centre(t)
+        r = np.maximum(np.linalg.norm(d, axis=1), 1e-6)
+        rc = self.core_radius
+        v_t = np.where(r < rc, self.max_speed * r / rc, self.max_speed * rc / r)
+        radial = d / r[:, None]
+        tangent = np.stack([-radial[:, 1], radial[:, 0]], axis=1)
+        if self.clockwise:
+            tangent = -tangent
+        v_r = np.where(r < rc, 0.0, -self.inflow * v_t)
+        w = self.updraft * self.max_speed * np.exp(-((r / rc) ** 2))
+        out = np.zeros_like(points)
+        out[:, :2] = tangent * v_t[:, None] + radial * v_r[:, None] + self.velocity
+        out[:, 2] = w
+        return out
+
+    def distance_at_closest(self, xy: np.ndarray, t0: float, t1: float) -> np.ndarray:
+        """Smallest horizontal distance (m) from each point to the vortex
+        centre between t0 and t1."""
+        a = self.centre(t0)
+        b = self.centre(t1)
+        ab = b - a
+        denom = float(ab @ ab)
+        s = np.zeros(len(xy)) if denom == 0 else np.clip(((xy - a) @ ab) / denom, 0, 1)
+        closest = a + s[:, None] * ab
+        return np.linalg.norm(xy - closest, axis=1)
+
+
+@dataclass
+class Attractor:
+    """Acceleration toward `position` (m): `strength` m/s^2 at `radius` m,
+    falling as 1/r^2 outside and linearly to zero inside (a uniform sphere's
+    gravity), active from `time` to `end` (s)."""
+
+    position: np.ndarray
+    strength: float
+    radius: float = 1.0
+    time: float = 0.0
+    end: float = math.inf
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=float)
+
+    def acceleration(self, points: np.ndarray, t: float) -> np.ndarray:
+        if t < self.time or t > self.end:
+            return np.zeros_like(points)
+        d = self.position - points
+        r = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+        mag = np.where(r > self.radius, self.strength * (self.radius / r) ** 2,
+                       self.strength * r / self.radius)
+        return d / r[:, None] * mag[:, None]

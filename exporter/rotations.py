@@ -1,0 +1,113 @@
+"""Vectorised rotation helpers: rotation vectors, matrices, quaternions
+(x, y, z, w order, as glTF)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def matrices_from_rotvec(rho: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) from rotation vectors (N, 3) (Rodrigues)."""
+    theta = np.linalg.norm(rho, axis=1)
+    small = theta < 1e-8
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta**2 / 6, np.sin(theta) / safe)
+    b = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(theta)) / (safe * safe))
+    x, y, z = rho[:, 0], rho[:, 1], rho[:, 2]
+    r = np.empty((len(rho), 3, 3))
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    r[:, 0, 0] = 1 - b * (yy + zz)
+    r[:, 0, 1] = -a * z + b * xy
+    r[:, 0, 2] = a * y + b * xz
+    r[:, 1, 0] = a * z + b * xy
+    r[:, 1, 1] = 1 - b * (xx + zz)
+    r[:, 1, 2] = -a * x + b * yz
+    r[:, 2, 0] = -a * y + b * xz
+    r[:, 2, 1] = a * x + b * yz
+    r[:, 2, 2] = 1 - b * (xx + yy)
+    return r
+
+
+def apply(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """r (N, 3, 3) times v (N, 3), written out so each row is computed alone."""
+    return (r[:, :, 0] * v[:, 0:1] + r[:, :, 1] * v[:, 1:2] + r[:, :, 2] * v[:, 2:3])
+
+
+def apply_transposed(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """r^T (N, 3, 3) times v (N, 3)."""
+    return (r[:, 0, :] * v[:, 0:1] + r[:, 1, :] * v[:, 1:2] + r[:, 2, :] * v[:, 2:3])
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for stacks of 3x3 matrices."""
+    out = np.empty_like(a)
+    for j in range(3):
+        out[:, :, j] = apply(a, b[:, :, j])
+    return out
+
+
+def quaternions_from_matrices(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (N, 4) in x, y, z, w order, w >= 0."""
+    m00, m11, m22 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
+    tr = m00 + m11 + m22
+    q = np.empty((len(r), 4))
+    cases = np.stack([tr, m00, m11, m22], axis=1).argmax(axis=1)
+    for case in range(4):
+        sel = cases == case
+        if not sel.any():
+            continue
+        m = r[sel]
+        if case == 0:
+            s = np.sqrt(tr[sel] + 1.0) * 2
+            q[sel] = np.stack([(m[:, 2, 1] - m[:, 1, 2]) / s, (m[:, 0, 2] - m[:, 2, 0]) / s,
+                               (m[:, 1, 0] - m[:, 0, 1]) / s, 0.25 * s], axis=1)
+        elif case == 1:
+            s = np.sqrt(1.0 + m[:, 0, 0] - m[:, 1, 1] - m[:, 2, 2]) * 2
+            q[sel] = np.stack([0.25 * s, (m[:, 0, 1] + m[:, 1, 0]) / s,
+                               (m[:, 0, 2] + m[:, 2, 0]) / s, (m[:, 2, 1] - m[:, 1, 2]) / s],
+                              axis=1)
+        elif case == 2:
+            s = np.sqrt(1.0 + m[:, 1, 1] - m[:, 0, 0] - m[:, 2, 2]) * 2
+            q[sel] = np.stack([(m[:, 0, 1] + m[:, 1, 0]) / s, 0.25 * s,
+                               (m[:, 1, 2] + m[:, 2, 1]) / s, (m[:, 0, 2] - m[:, 2, 0]) / s],
+                              axis=1)
+        else:
+            s = np.sqrt(1.0 + m[:, 2, 2] - m[:, 0, 0] - m[:, 1, 1]) * 2
+            q[sel] = np.stack([(m[:, 0, 2] + m[:, 2, 0]) / s, (m[:, 1, 2] + m[:, 2, 1]) / s,
+                               0.25 * s, (m[:, 1, 0] - m[:, 0, 1]) / s], axis=1)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q *= np.where(q[:, 3:4] < 0, -1.0, 1.0)
+    return q
+
+
+def matrices_from_quaternions(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) from quaternions (N, 4) x, y, z, w."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    r = np.empty((len(q), 3, 3))
+    r[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    r[:, 0, 1] = 2 * (x * y - z * w)
+    r[:, 0, 2] = 2 * (x * z + y * w)
+    r[:, 1, 0] = 2 * (x * y + z * w)
+    r[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    r[:, 1, 2] = 2 * (y * z - x * w)
+    r[:, 2, 0] = 2 * (x * z - y * w)
+    r[:, 2, 1] = 2 * (y * z + x * w)
+    r[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+def angle_between(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) between quaternion arrays (..., 4)."""
+    dot = np.abs((qa * qb).sum(-1))
+    return 2 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+def continuous_hemisphere(q: np.ndarray) -> np.ndarray:
+    """Flip quaternions along axis 0 (time) so consecutive keys have a
+    non-negative dot product (for importers that interpolate components)."""
+    out = q.copy()
+    for f in range(1, len(out)):
+        flip = (out[f] * out[f - 1]).sum(-1) < 0
+        out[f][flip] *= -1
+    return out

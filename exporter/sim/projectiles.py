@@ -1,0 +1,169 @@
+"""Projectiles (heavy boxes and spheres) for the planar LOD.
+
+They fly in 3D under gravity, integrated at the force rate. Contact with
+bones is a swept sphere-capsule test along each step's path (no tunnelling
+through thin branches); a hit exchanges an impulse with restitution and
+Coulomb friction, applied with opposite signs to the projectile and to the
+bone's bodies, so momentum goes both ways. Boxes collide as their inscribed
+sphere (documented simplification) but carry their orientation and spin.
+The ground is the plane z = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene import Scene
+
+
+def closest_segment_points(p0, p1, q0, q1):
+    """Closest points between segments p0-p1 (N, 3) and q0-q1 (N, 3): the
+    parameters s, u in [0, 1] and the distance."""
+    d1 = p1 - p0
+    d2 = q1 - q0
+    r = p0 - q0
+    a = (d1 * d1).sum(1)
+    e = (d2 * d2).sum(1)
+    f = (d2 * r).sum(1)
+    c = (d1 * r).sum(1)
+    b = (d1 * d2).sum(1)
+    denom = a * e - b * b
+    eps = 1e-12
+    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1), 0, 1),
+                 0.0)
+    s = np.where(a > eps, s, 0.0)
+    u = np.where(e > eps, (b * s + f) / np.where(e > eps, e, 1), 0.0)
+    # clamp u and recompute s
+    u_lo, u_hi = u < 0, u > 1
+    u = np.clip(u, 0, 1)
+    s = np.where(u_lo & (a > eps), np.clip(-c / np.where(a > eps, a, 1), 0, 1), s)
+    s = np.where(u_hi & (a > eps), np.clip((b - c) / np.where(a > eps, a, 1), 0, 1), s)
+    cp = p0 + d1 * s[:, None]
+    cq = q0 + d2 * u[:, None]
+    return s, u, np.linalg.norm(cp - cq, axis=1), cp, cq
+
+
+class Projectiles:
+    def __init__(self, shapes, sizes, masses, positions, velocities, times, restitution,
+                 friction, frames: int):
+        self.shape = list(shapes)
+        self.size = np.asarray(sizes, dtype=float)
+        self.radius = self.size / 2
+        self.mass = np.asarray(masses, dtype=float)
+        self.pos = np.asarray(positions, dtype=float).copy()
+        self.vel = np.zeros_like(self.pos)
+        self.launch_vel = np.asarray(velocities, dtype=float)
+        self.time = np.asarray(times, dtype=float)
+        self.e = np.asarray(restitution, dtype=float)
+        self.mu = np.asarray(friction, dtype=float)
+        self.launched = np.zeros(len(self.mass), dtype=bool)
+        self.quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(self.mass), 1))
+        self.spin = np.zeros_like(self.pos)
+        self.inertia = np.where(np.array([s == "box" for s in self.shape]),
+                                self.mass * self.size**2 / 6, 0.4 * self.mass * self.radius**2)
+        self.track_pos = np.zeros((frames, len(self.mass), 3))
+        self.track_quat = np.zeros((frames, len(self.mass), 4))
+        self.track_pos[0] = self.pos
+        self.track_quat[0] = self.quat
+        self.hits = 0
+
+    @classmethod
+    def from_scene(cls, scene: Scene) -> Projectiles:
+        p = scene.projectiles
+        return cls([x.shape for x in p], [x.size for x in p], [x.mass for x in p],
+                   [x.position for x in p], [x.velocity for x in p], [x.time for x in p],
+                   [x.restitution for x in p], [x.friction for x in p], scene.frame_count)
+
+    def record(self, frame: int) -> None:
+        self.track_pos[frame] = self.pos
+        self.track_quat[frame] = self.quat
+
+    def advance(self, t: float, dt: float, pose: dict, solver) -> None:
+        start = ~self.launched & (t >= self.time)
+        self.vel[start] = self.launch_vel[start]
+        self.launched |= start
+        live = np.nonzero(self.launched)[0]
+        if not len(live):
+            return
+        g = solver.loads.g
+        for i in live:
+            v = self.vel[i] + g * dt
+            a, b = self.pos[i].copy(), self.pos[i] + v * dt
+            hit = self._hit_bones(i, a, b, v, pose, solver)
+            if hit is not None:
+                s, v = hit
+                b = a + (b - a) * s + v * dt * (1 - s)
+            self.pos[i], self.vel[i] = b, v
+            self._ground(i, dt)
+            w = self.spin[i]
+            if np.any(w):
+                x, y, z, qw = self.quat[i]
+                dq = 0.5 * dt * np.array([w[0] * qw + w[1] * z - w[2] * y,
+                                          -w[0] * z + w[1] * qw + w[2] * x,
+                                          w[0] * y - w[1] * x + w[2] * qw,
+                                          -w[0] * x - w[1] * y - w[2] * z])
+                q = self.quat[i] + dq
+                self.quat[i] = q / np.linalg.norm(q)
+
+    def _hit_bones(self, i, a, b, v, pose, solver):
+        piv = pose["pivot"]
+        tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
+        mid = 0.5 * (piv + tip)
+        reach = 0.5 * np.linalg.norm(tip - piv, axis=1) + solver.radius + self.radius[i] \
+            + 0.5 * np.linalg.norm(b - a)
+        near = np.nonzero(np.linalg.norm(mid - 0.5 * (a + b), axis=1) < reach)[0]
+        if not len(near):
+            return None
+        m = len(near)
+        s, u, dist, cp, cq = closest_segment_points(np.repeat(a[None], m, 0),
+                                                    np.repeat(b[None], m, 0), piv[near], tip[near])
+        touching = dist < solver.radius[near] + self.radius[i]
+        if not touching.any():
+            return None
+        k = np.nonzero(touching)[0]
+        k = k[np.argmin(s[k])]
+        bone = int(near[k])
+        point = cq[k]
+        normal = cp[k] - cq[k]
+        nn = np.linalg.norm(normal)
+        normal = normal / nn if nn > 1e-9 else -v / max(np.linalg.norm(v), 1e-9)
+        v_bone = pose["vcog"][bone] + np.cross(pose["omega"][bone], point - pose["cog"][bone])
+        rel = v - v_bone
+        vn = rel @ normal
+        if vn >= 0:
+            return None
+        m_bone = solver.lump_mass[bone]
+        reduced = 1.0 / (1.0 / self.mass[i] + 1.0 / m_bone)
+        jn = -(1 + self.e[i]) * vn * reduced
+        vt = rel - vn * normal
+        st = np.linalg.norm(vt)
+        jt = np.zeros(3) if st < 1e-9 else -vt / st * min(self.mu[i] * jn, reduced * st)
+        impulse = jn * normal + jt  # on the projectile
+        v = v + impulse / self.mass[i]
+        r = -normal * self.radius[i]
+        self.spin[i] += np.cross(r, jt) / self.inertia[i]
+        solver.apply_impulse(bone, -impulse, point + normal * solver.radius[bone], pose)
+        self.hits += 1
+        return float(s[k]), v
+
+    def _ground(self, i: int, dt: float) -> None:
+        r = self.radius[i]
+        if self.pos[i, 2] >= r:
+            return
+        self.pos[i, 2] = r
+        vz = self.vel[i, 2]
+        if vz < 0:
+            self.vel[i, 2] = -self.e[i] * vz
+            vh = self.vel[i, :2]
+            speed = np.linalg.norm(vh)
+            if speed > 0:
+                dv = min(speed, self.mu[i] * (1 + self.e[i]) * -vz)
+                self.vel[i, :2] = vh - vh / speed * dv
+        # resting contact: friction and spin decay
+        if abs(self.vel[i, 2]) < 0.2:
+            vh = self.vel[i, :2]
+            speed = np.linalg.norm(vh)
+            if speed > 0:
+                dv = min(speed, self.mu[i] * 9.81 * dt)
+                self.vel[i, :2] = vh - vh / speed * dv
+            self.spin[i] *= 0.8

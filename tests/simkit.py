@@ -1,0 +1,43 @@
+"""Helpers for physics tests: bake a grammar written inline, read motion back."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from exporter.bake import Bake, TreeBake
+from exporter.pipeline import bake_scene
+from exporter.scene import parse_scene
+from exporter.sway import segment_ends
+
+BARE = "drag: 0\nleaf drag: 0\n"  # no air: analytic comparisons
+
+
+def bake_text(tmp_path: Path, grammar: str, solver: str = "planar", **scene) -> Bake:
+    """Write `grammar` to a file and bake one tree of it in a scene built
+    from the keyword arguments (TOML keys of docs/scenes.md)."""
+    path = tmp_path / "g.lsys"
+    path.write_text(grammar)
+    raw = {"tree": [{"grammar": str(path)}], "ground": False}
+    raw.update(scene)
+    return bake_scene(parse_scene(raw, file="<test>"), solver=solver)
+
+
+def tip(tree: TreeBake, segment: int = -1) -> np.ndarray:
+    """World position (F, 3) of the end of a segment (default: the last)."""
+    s = segment % tree.n_segments
+    return segment_ends(tree, [s])[:, 0]
+
+
+def kinetic_energy(bake: Bake, tree: int = 0) -> np.ndarray:
+    """Translational kinetic energy (J) per frame interval, from the baked
+    motion alone: segment mid-points differenced between frames, weighted by
+    solid-cylinder masses at `density` (1 kg/m^3 units: relative use only)."""
+    t = bake.trees[tree]
+    ends = segment_ends(t, np.arange(t.n_segments))
+    mids = 0.5 * (t.positions + ends)
+    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
+    mass = np.pi / 4 * t.width**2 * length
+    v = np.diff(mids, axis=0) * bake.fps
+    return 0.5 * (mass[None, :, None] * v * v).sum(axis=(1, 2))

@@ -1,0 +1,186 @@
+"""The planar LOD against independent truths: the spring pendulum, the
+Euler-Bernoulli cantilever, the static beam, the drag law and the Kaimal
+gust spectrum."""
+
+import math
+
+import numpy as np
+import pytest
+from simkit import BARE, bake_text, tip
+
+from exporter.forces import Wind, drag, kaimal_spectrum, synthesize
+from exporter.sway import damping_ratio, frequency
+
+E, RHO = 8.0e9, 800.0  # green wood, Pa and kg/m^3
+
+
+def pendulum_frequency(k, m, length, radius, g, hanging):
+    """Spring pendulum, small angles: w^2 = (k +- m g d) / I_pivot for a solid
+    cylinder pivoting at one end (d = length/2)."""
+    i_pivot = m * (length**2 / 3 + radius**2 / 4)
+    torque = m * g * length / 2
+    return math.sqrt((k + (torque if hanging else -torque)) / i_pivot) / (2 * math.pi)
+
+
+@pytest.mark.parametrize("hanging", [False, True])
+def test_single_bone_matches_spring_pendulum(tmp_path, hanging):
+    length, diameter, k = 1.0, 0.05, 50.0
+    turn = "&(180)" if hanging else ""
+    grammar = f"density: {RHO}\ndamping: 0\n{BARE}axiom: @stiffness({k}){turn}!({diameter})F({length})\n"
+    m = RHO * math.pi / 4 * diameter**2 * length
+    expected = pendulum_frequency(k, m, length, diameter / 2, 9.81, hanging)
+    bake = bake_text(tmp_path, grammar, duration=8.0, fps=240,
+                     pull=[{"tree": 0, "force": [2.0, 0, 0], "release": 1.0, "at": 1.0}])
+    t, x = bake.times, tip(bake.trees[0])[:, 0]
+    free = t > 1.02
+    measured = frequency(t[free], x[free])
+    assert measured == pytest.approx(expected, rel=0.02)
+    # the pull moved it (the test measured a real oscillation)
+    assert abs(x[np.searchsorted(t, 1.0)]) > 0.01
+
+
+def cantilever_grammar(n, length=10.0, diameter=0.2, damping=0.0):
+    return (f"density: {RHO}\nmodulus: {E}\ndamping: {damping}\n{BARE}iterations: {n}\n"
+            f"axiom: !({diameter})A({n})\nA(n) : n > 0 -> F({length}/{n})A(n-1)\n")
+
+
+def beam_f1(length=10.0, diameter=0.2):
+    ei = E * math.pi * diameter**4 / 64
+    mass_per_length = RHO * math.pi * diameter**2 / 4
+    return 0.5596 * math.sqrt(ei / (mass_per_length * length**4))
+
+
+@pytest.mark.parametrize("n", [10, 20, 30])
+def test_chain_matches_cantilever_first_frequency(tmp_path, n):
+    """Real green-wood stiffness (E = 8 GPa): a 10 m x 0.2 m stem in n bones,
+    gravity off (the beam formula has none), pulled at the top and released."""
+    bake = bake_text(tmp_path, cantilever_grammar(n), duration=9.0, fps=120, gravity=0.0,
+                     pull=[{"tree": 0, "force": [100.0, 0, 0], "release": 1.0, "at": 1.0}])
+    t, x = bake.times, tip(bake.trees[0])[:, 0]
+    free = t > 1.02
+    assert frequency(t[free], x[free]) == pytest.approx(beam_f1(), rel=0.02)
+
+
+def test_structural_damping_ratio_is_the_grammars(tmp_path):
+    """Mass-proportional damping gives the first mode the grammar's ratio."""
+    bake = bake_text(tmp_path, cantilever_grammar(20, damping=0.05), duration=8.0, fps=120,
+                     gravity=0.0,
+                     pull=[{"tree": 0, "force": [100.0, 0, 0], "release": 1.0, "at": 1.0}])
+    t, x = bake.times, tip(bake.trees[0])[:, 0]
+    free = t > 1.02
+    assert damping_ratio(t[free], x[free]) == pytest.approx(0.05, abs=0.01)
+
+
+def test_horizontal_branch_sags_like_the_static_beam(tmp_path):
+    """Uniform load w = rho A g on a horizontal cantilever: tip deflection
+    w L^4 / (8 E I), downward, nothing sideways (prestress off)."""
+    length, diameter, n = 3.0, 0.05, 15
+    grammar = (f"density: {RHO}\nmodulus: {E}\ndamping: 0.5\n{BARE}iterations: {n}\n"
+               f"axiom: &(90)!({diameter})A({n})\nA(n) : n > 0 -> F({length}/{n})A(n-1)\n")
+    bake = bake_text(tmp_path, grammar, duration=6.0, fps=24, prestress=False)
+    end = tip(bake.trees[0])
+    rest = end[0]
+    w = RHO * math.pi / 4 * diameter**2 * 9.81
+    ei = E * math.pi * diameter**4 / 64
+    expected = w * length**4 / (8 * ei)
+    sag = rest[2] - end[-1, 2]
+    assert sag == pytest.approx(expected, rel=0.03)
+    sideways = np.abs(end[-1, :2] - rest[:2])
+    assert sideways.max() < 0.05 * expected + 1e-4  # shortening along the branch only
+    # settled: the last second moves less than 1 % of the sag
+    assert np.ptp(end[-24:, 2]) < 0.01 * expected
+
+
+def test_prestressed_tree_stays_still_in_calm_air(tmp_path):
+    """The grown shape is the equilibrium under gravity: nothing moves."""
+    grammar = (f"density: {RHO}\nmodulus: {E}\n{BARE}"
+               "axiom: !(0.3)F(2)F(2)[&(70)!(0.1)F(1)F(1)F(1)][^(60)!(0.08)F(1)F(1)]F(2)\n")
+    bake = bake_text(tmp_path, grammar, duration=3.0, fps=24,
+                     pull=[{"tree": 0, "force": [0.0, 0, 0], "release": 0.1}])
+    moved = np.abs(bake.trees[0].positions - bake.trees[0].positions[0]).max()
+    assert bake.trees[0].positions.shape[0] == 73  # it was simulated
+    assert moved < 1e-4
+
+
+# ---------------------------------------------------------------------------
+# drag
+
+
+def test_drag_on_a_bone_across_the_flow():
+    axis = np.array([[0.0, 0.0, 1.0]])
+    air = np.array([[10.0, 0.0, 0.0]])
+    area = np.array([0.2])  # diameter x length, m^2
+    f = drag(air, np.zeros((1, 3)), axis, area, np.zeros(1), 1.2, 0.0)
+    assert f[0] == pytest.approx([0.5 * 1.2 * 1.2 * 0.2 * 100.0, 0.0, 0.0])
+    # quadratic in the relative speed
+    f2 = drag(2 * air, np.zeros((1, 3)), axis, area, np.zeros(1), 1.2, 0.0)
+    assert f2[0, 0] == pytest.approx(4 * f[0, 0])
+
+
+def test_drag_uses_the_relative_velocity_and_the_normal_component():
+    axis = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    air = np.array([[10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    vel = np.array([[10.0, 0.0, 0.0], [0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    f = drag(air, vel, axis, np.full(3, 0.2), np.zeros(3), 1.2, 0.0)
+    assert np.allclose(f[0], 0.0)  # moving with the air
+    assert np.allclose(f[1], 0.0)  # flow along the bone: no cross-flow drag
+    assert f[2, 0] < 0  # moving through still air is resisted (air damping)
+    assert f[2, 0] == pytest.approx(-0.5 * 1.2 * 1.2 * 0.2 * 4.0)
+
+
+def test_foliage_streamlines_above_the_reference_speed():
+    """Vogel reconfiguration: F ~ U^2 below u0, F ~ U^(2+b) above (b = -0.7)."""
+    axis = np.array([[0.0, 0.0, 1.0]])
+
+    def leaf_force(u):
+        return drag(np.array([[u, 0.0, 0.0]]), np.zeros((1, 3)), axis, np.zeros(1),
+                    np.ones(1), 0.0, 0.3)[0, 0]
+
+    assert leaf_force(2.0) / leaf_force(1.0) == pytest.approx(4.0)
+    assert leaf_force(20.0) / leaf_force(10.0) == pytest.approx(2 ** 1.3)
+
+
+# ---------------------------------------------------------------------------
+# gusts
+
+
+def test_gust_series_has_the_kaimal_statistics():
+    sigma, length, mean, dt, count = 2.0, 50.0, 10.0, 0.05, 2**14
+    spectra, variances, means = [], [], []
+    for seed in range(40):
+        x = synthesize(np.random.default_rng(seed), count, dt, sigma, length, mean)
+        means.append(x.mean())
+        variances.append(x.var())
+        spectra.append(np.abs(np.fft.rfft(x)) ** 2 * 2 * dt / count)  # one-sided PSD
+    freqs = np.fft.rfftfreq(count, dt)
+    # the variance the record can hold: the spectrum's integral between its
+    # lowest and highest resolved frequencies
+    df = freqs[1]
+    expected_var = float(np.sum(kaimal_spectrum(freqs[1:], sigma, length, mean)) * df)
+    assert np.mean(variances) == pytest.approx(expected_var, rel=0.03)
+    assert expected_var > 0.8 * sigma**2
+    assert abs(np.mean(means)) < 1e-9  # zero mean by construction
+    psd = np.mean(spectra, axis=0)
+    # compare in octave bands from 0.01 Hz to 5 Hz
+    edges = 0.01 * 2.0 ** np.arange(0, 9)
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        band = (freqs >= lo) & (freqs < hi)
+        model = kaimal_spectrum(freqs[band], sigma, length, mean)
+        assert psd[band].mean() == pytest.approx(model.mean(), rel=0.1)
+    # the inertial subrange falls as f^(-5/3)
+    hi = (freqs > 2) & (freqs < 8)
+    slope = np.polyfit(np.log(freqs[hi]), np.log(psd[hi]), 1)[0]
+    assert slope == pytest.approx(-5 / 3, abs=0.1)
+
+
+def test_wind_field_mean_profile_and_turbulence_intensity():
+    wind = Wind(12.0, np.array([1.0, 0.0, 0.0]), turbulence=0.2, ramp=0.0)
+    wind.prepare(np.random.default_rng(1), 600.0, np.array([[-5, -5], [5, 5]]))
+    times = np.arange(0, 600, 0.1)
+    at = np.array([[0.0, 0.0, 10.0], [0.0, 0.0, 20.0]])
+    u = np.array([wind.velocity(at, t) for t in times])  # (T, 2, 3)
+    assert u[:, 0, 0].mean() == pytest.approx(12.0, rel=0.05)
+    assert u[:, 1, 0].mean() == pytest.approx(12.0 * 2**0.14, rel=0.05)  # power law
+    assert u[:, 0, 0].std() / 12.0 == pytest.approx(0.2, rel=0.15)
+    assert u[:, 0, 1].std() == pytest.approx(0.8 * u[:, 0, 0].std(), rel=0.2)
+    assert u[:, 0, 2].std() == pytest.approx(0.5 * u[:, 0, 0].std(), rel=0.2)
