@@ -76,8 +76,9 @@ class ObjectsBake:
 class Bake:
     times: np.ndarray  # (F,) s
     trees: list[TreeBake]
-    meta: dict
+    meta: dict  # saved: deterministic facts about the bake
     objects: ObjectsBake | None = None
+    timing: dict = field(default_factory=dict)  # not saved: seconds spent (varies run to run)
 
     @property
     def fps(self) -> float:

@@ -94,24 +94,38 @@ class TreeModel:
                 names[s] = f"{limb.path}:{k}"
         return names
 
+    def limb_children(self) -> list[list[int]]:
+        """For each limb, the indices of the limbs attached to it."""
+        out: list[list[int]] = [[] for _ in self.limbs]
+        for i, child in enumerate(self.limbs):
+            if child.parent >= 0:
+                out[child.parent].append(i)
+        return out
+
+    def continuation(self, limb: int, children: list[list[int]]) -> int:
+        """The limb that continues `limb`'s axis past its last point: the
+        widest limb starting there, if at least half as wide (a leader or a
+        sympodial continuation, not a side branch or a frond); -1 if none.
+        `children` is `limb_children()`."""
+        li = self.limbs[limb]
+        last = len(li.points) - 1
+        forks = [i for i in children[limb] if self.limbs[i].attach == last
+                 and self.limbs[i].segments]
+        if not forks:
+            return -1
+        best = max(forks, key=lambda i: (self.width[self.limbs[i].segments[0]], -i))
+        wide = self.width[self.limbs[best].segments[0]] >= 0.5 * self.width[li.segments[-1]]
+        return best if wide else -1
+
     def main_stem(self) -> list[int]:
-        """Segments of the main stem from the ground up: the first root limb,
-        continued at each fork by the widest limb leaving its last point if it
-        is at least half as wide (a leader, not a side branch or frond)."""
-        limb = 0
-        stem: list[int] = []
-        while True:
-            segs = self.limbs[limb].segments
-            stem.extend(segs)
-            last = len(self.limbs[limb].points) - 1
-            forks = [i for i, child in enumerate(self.limbs)
-                     if child.parent == limb and child.attach == last and child.segments]
-            if not forks:
-                return stem
-            best = max(forks, key=lambda i: (self.width[self.limbs[i].segments[0]], -i))
-            if self.width[self.limbs[best].segments[0]] < 0.5 * self.width[segs[-1]]:
-                return stem
-            limb = best
+        """Segments of the main stem from the ground up: the first root limb
+        and its continuations."""
+        children = self.limb_children()
+        limb, stem = 0, []
+        while limb >= 0:
+            stem.extend(self.limbs[limb].segments)
+            limb = self.continuation(limb, children)
+        return stem
 
     def dbh(self) -> float:
         """Stem diameter at breast height (1.3 m) of the first root limb, m;

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,9 @@ from .model import TreeModel, placed
 from .rig import RigOptions, build_rig
 from .rotations import apply, matrices_from_quaternions
 from .scene import QUALITIES, Quality, Scene
+from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
 from .sim.loads import SceneLoads
+from .sim.planar import PlanarSolver
 from .turtle import interpret
 
 
@@ -112,87 +114,104 @@ def tree_quality(scene: Scene, spec) -> Quality:
     return QUALITIES[spec.quality] if spec.quality else scene.quality
 
 
-def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
-               log=None, progress=None) -> Bake:
-    """Grow, rig, simulate and bake a scene."""
-    log = log or (lambda msg: None)
-    started = time.perf_counter()
-    q = quality or scene.quality
-    if quality is not None:
-        scene = replace(scene, quality=quality)
-    grown = grow(scene)
-    lo = np.min([g.model.points.min(0) for g in grown], axis=0)
-    hi = np.max([g.model.points.max(0) for g in grown], axis=0)
-    loads = SceneLoads(scene, np.array([lo[:2] - 20, hi[:2] + 20]))
+def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads,
+            quality: Quality | None) -> tuple[list[SimTree], dict[str, str]]:
+    """Rig every tree and decide which need simulating: trees that no force
+    reaches and that start at rest (gravity is balanced by the prestress)
+    stay static. Returns the trees and, for static ones, why."""
     cuts = {c.tree: c for c in scene.cuts}
     pulls: dict[int, list] = {}
     for p in scene.pulls:
         pulls.setdefault(p.tree, []).append(p)
-    from .sim.common import SimTree
-    from .sim.planar import PlanarSolver
-
-    sim_trees = []
-    static_reasons = {}
+    sim_trees, static = [], {}
     for i, g in enumerate(grown):
         m = g.model
-        tq = tree_quality(scene, g.spec) if quality is None else q
-        height = max(m.height, 1e-3)
-        rig = build_rig(m, RigOptions(min_bone_length=tq.bone_length * height))
-        tlo, thi = m.bounds()
-        centre = 0.5 * (tlo + thi)
-        radius = 0.5 * float(np.linalg.norm(thi[:2] - tlo[:2]))
+        q = quality or tree_quality(scene, g.spec)
+        rig = build_rig(m, RigOptions(min_bone_length=q.bone_length * max(m.height, 1e-3)))
+        lo, hi = m.bounds()
+        centre = 0.5 * (lo + hi)
+        radius = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2]))
         reached = (not scene.prestress or i in cuts or i in pulls
-                   or loads.quiet_after(centre, radius, float(thi[2])) > 0
+                   or loads.quiet_after(centre, radius, float(hi[2])) > 0
                    or (scene.projectiles and _projectile_reaches(scene, m)))
         if not reached:
-            static_reasons[m.name] = "no force reaches it (gravity is balanced by prestress)"
-        sim_trees.append(SimTree(m.name, rig, tq.planes,
+            static[m.name] = "no force reaches it (gravity is balanced by the prestress)"
+        sim_trees.append(SimTree(m.name, rig, q.planes,
                                  load_direction(scene, loads, m, cuts.get(i), pulls.get(i)),
                                  cuts.get(i), pulls.get(i, []), active=bool(reached)))
+    return sim_trees, static
+
+
+def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
+    """What the planar LOD adapted or clamped, in words (never silently)."""
+    notes = []
+    if stats.inertia_floored:
+        notes.append(f"stability: rotary inertia raised on {stats.inertia_floored} of "
+                     f"{stats.bodies} bodies (up to {stats.max_inertia_ratio:.1f}x) to keep "
+                     f"omega*h <= {quality.stability:g} at h = {h * 1e3:.3f} ms")
+    if stats.limited:
+        tree, seg, t, acc = stats.first_limit
+        notes.append(f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone "
+                     f"updates (first: tree {tree!r}, segment {seg}, t = {t:.3f} s, "
+                     f"{acc:.0f} m/s^2): the motion there is milder than the load asks")
+    if stats.broken:
+        notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
+    return notes
+
+
+def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
+               log=None, progress=None) -> Bake:
+    """Grow, rig, simulate and bake a scene. `quality` overrides the scene's
+    (and every tree's). Deterministic: the same inputs give the same bake."""
+    log = log or (lambda msg: None)
+    started = time.perf_counter()
+    if quality is not None:
+        scene = replace(scene, quality=quality)
+    q = scene.quality
+    grown = grow(scene)
+    lo = np.min([g.model.points.min(0) for g in grown], axis=0)
+    hi = np.max([g.model.points.max(0) for g in grown], axis=0)
+    loads = SceneLoads(scene, np.array([lo[:2] - 20, hi[:2] + 20]))
+    sim_trees, static = prepare(scene, grown, loads, quality)
     active = [t for t in sim_trees if t.active]
     log(f"{len(grown)} trees, {len(active)} simulated, "
-        f"{sum(t.rig.n_bones for t in active)} bones, quality {q.name}")
+        f"{sum(t.rig.n_bones for t in active)} bones, solver {solver}, quality {q.name}")
     frames = scene.frame_count
-    times = np.arange(frames) / scene.fps
     meta = {
         "tool": f"treebake {__version__}", "scene": scene.name, "scene_hash": scene.source_hash,
         "fps": scene.fps, "duration": scene.duration, "seed": scene.seed, "solver": solver,
-        "quality": q.__dict__, "prestress": scene.prestress, "gravity": scene.gravity,
+        "quality": asdict(q), "prestress": scene.prestress, "gravity": scene.gravity,
     }
-    motions = {}
+    timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
+    motions: dict[str, TreeMotion] = {}
     objects = None
-    if active:
-        if solver == "planar":
-            sim = PlanarSolver(sim_trees, scene, q, loads, log=log)
-            st = sim.stats
-            if st.inertia_floored:
-                msg = (f"stability: rotary inertia raised on {st.inertia_floored} of {st.bodies}"
-                       f" bodies (up to {st.max_inertia_ratio:.1f}x) to keep "
-                       f"h*omega <= {q.stability} at h = {sim.h * 1e3:.3f} ms")
-                log(msg)
-                st.notes.append(msg)
-            for tree, motion in zip(active, sim.run(progress)):
-                motions[tree.name] = motion
-            meta["substep"] = sim.h
-            meta["force_interval"] = sim.dt_update
-            meta["stats"] = {"bodies": st.bodies, "bones": st.bones, "substeps": st.substeps,
-                             "updates": st.updates, "step_seconds": round(st.step_seconds, 3),
-                             "update_seconds": round(st.update_seconds, 3),
-                             "inertia_floored": st.inertia_floored,
-                             "max_inertia_ratio": round(st.max_inertia_ratio, 3),
-                             "max_joint_gap": float(f"{st.max_joint_gap:.3g}")}
-            meta["notes"] = st.notes
-            if sim.projectiles is not None:
-                pr = sim.projectiles
-                objects = ObjectsBake(pr.shape, pr.size, pr.track_pos, pr.track_quat)
-        else:
-            from .sim.reference import ReferenceSolver
+    if active and solver == "planar":
+        sim = PlanarSolver(sim_trees, scene, q, loads, log=log)
+        for tree, motion in zip(active, sim.run(progress)):
+            motions[tree.name] = motion
+        st = sim.stats
+        meta["substep"] = sim.h
+        meta["force_interval"] = sim.dt_update
+        meta["stats"] = {k: v for k, v in asdict(st).items()
+                         if k not in ("notes", "step_seconds", "update_seconds", "first_limit")}
+        meta["stats"]["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
+        meta["notes"] = _planar_notes(st, q, sim.h)
+        timing.update(step_seconds=round(st.step_seconds, 3),
+                      update_seconds=round(st.update_seconds, 3),
+                      segment_steps=sum(t.rig.model.n_segments for t in active) * st.substeps)
+        if sim.projectiles is not None:
+            pr = sim.projectiles
+            objects = ObjectsBake(pr.shape, pr.size, pr.track_pos, pr.track_quat)
+    elif active:
+        from .sim.reference import ReferenceSolver
 
-            ref = ReferenceSolver(sim_trees, scene, q, loads, log=log)
-            for tree, motion in zip(active, ref.run(progress)):
-                motions[tree.name] = motion
-            meta.update(ref.meta())
-            objects = ref.objects()
+        ref = ReferenceSolver(sim_trees, scene, q, loads, log=log)
+        for tree, motion in zip(active, ref.run(progress)):
+            motions[tree.name] = motion
+        meta.update(ref.meta())
+        objects = ref.objects()
+    for note in meta.get("notes", []):
+        log(note)
     trees = []
     for g, st_tree in zip(grown, sim_trees):
         info = {"grammar": str(g.spec.grammar), "grammar_hash": g.grammar_hash, "seed": g.seed,
@@ -200,14 +219,14 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
                 "bones": st_tree.rig.n_bones}
         motion = motions.get(g.model.name)
         if motion is None:
-            info["static"] = static_reasons.get(g.model.name, "not simulated")
+            info["static"] = static.get(g.model.name, "not simulated")
             pos, rot = segment_transforms(st_tree.rig, None, None)
         else:
             info["events"] = motion.events
             pos, rot = segment_transforms(st_tree.rig, motion.quaternions, motion.pivots)
         trees.append(tree_bake_from_model(g.model, pos, rot, info))
-    meta["wall_seconds"] = round(time.perf_counter() - started, 3)
-    return Bake(times, trees, meta, objects)
+    timing["wall_seconds"] = round(time.perf_counter() - started, 3)
+    return Bake(np.arange(frames) / scene.fps, trees, meta, objects, timing)
 
 
 def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None):

@@ -136,15 +136,36 @@ class Rig:
         return out
 
 
-def _group_segments(model: TreeModel, opts: RigOptions) -> list[list[list[int]]]:
-    """Per limb, the segments of each bone."""
+def physics_chains(model: TreeModel) -> list[list[int]]:
+    """Model limbs grouped into chains: a limb and its continuations, so that
+    an axis that forks sympodially (oak, willow) bends as one chain; ordered
+    by first limb, so a chain's parent chain comes first."""
+    children = model.limb_children()
+    taken = np.zeros(len(model.limbs), dtype=bool)
+    chains = []
+    for li in range(len(model.limbs)):
+        if taken[li] or not model.limbs[li].segments:
+            continue
+        chain = [li]
+        nxt = model.continuation(li, children)
+        while nxt >= 0 and not taken[nxt]:
+            chain.append(nxt)
+            nxt = model.continuation(nxt, children)
+        taken[chain] = True
+        chains.append(chain)
+    return chains
+
+
+def _group_segments(model: TreeModel, opts: RigOptions,
+                    chains: list[list[int]]) -> list[list[list[int]]]:
+    """Per chain, the segments of each bone."""
     lengths = model.seg_length
     groups = []
-    for limb in model.limbs:
+    for chain in chains:
         bones: list[list[int]] = []
         current: list[int] = []
         acc = 0.0
-        for s in limb.segments:
+        for s in (s for li in chain for s in model.limbs[li].segments):
             current.append(s)
             acc += lengths[s]
             # a relative tolerance so that n equal segments of L/n make n bones
@@ -172,7 +193,8 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
     ei = np.where(np.isnan(model.ei), model.modulus * np.pi * width**4 / 64, model.ei)
     compliance = seg_len / ei  # rad per N m
 
-    groups = _group_segments(model, opts)
+    chains = physics_chains(model)
+    groups = _group_segments(model, opts, chains)
     seg_bone = np.full(model.n_segments, -1, dtype=np.int64)
     bone_segs: list[list[int]] = []
     bone_limb: list[int] = []
@@ -217,9 +239,9 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
         bone_c[b] = float(compliance[idx].sum())
 
     limbs = []
-    for li, bones in enumerate(groups):
+    for chain, bones in zip(chains, groups):
         ids = [int(seg_bone[segs[0]]) for segs in bones]
-        limbs.append(RigLimb(int(bone_parent[ids[0]]), ids, model.limbs[li].path))
+        limbs.append(RigLimb(int(bone_parent[ids[0]]), ids, model.limbs[chain[0]].path))
 
     first_seg = np.array([segs[0] for segs in bone_segs])
     k = np.empty(n)

@@ -1,0 +1,171 @@
+"""Parts broken off a tree: each moves on as one rigid body in 3D.
+
+A broken branch (and everything it carries) leaves its limb's moving frame
+and its chain; from the break on it is a rigid body with the momentum it
+had, falling under gravity, dragged by the air, and stopped by the ground
+(penalty contact at its bones' ends, contact.py) until it comes to rest and
+sleeps. All debris bodies are integrated together with numpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rotations import apply, compose, matrices_from_rotvec
+from .contact import effective_mass, ground_forces
+
+SUBSTEPS = 4  # rigid-body steps per force update
+ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
+SLEEP_SPEED = 0.02  # m/s and rad/s below which a grounded body may sleep
+SLEEP_TIME = 0.5  # s at rest on the ground before it sleeps
+MIN_INERTIA_RATIO = 0.05  # smallest principal moment / largest
+
+
+class Debris:
+    """Rigid debris bodies made of bones of a solver's global bone arrays."""
+
+    def __init__(self, mass, inertia, com0, pivot0, tip0, radius, ground: bool):
+        self.mass, self.inertia = mass, inertia
+        self.com0, self.pivot0, self.tip0, self.radius = com0, pivot0, tip0, radius
+        self.ground = ground
+        self.bones = np.zeros(0, dtype=np.int64)  # bones in debris, in body order
+        self.owner = np.zeros(0, dtype=np.int64)  # debris body of each of those bones
+        self.rot0 = np.zeros((0, 3, 3))  # bone rotation (rel. rest) at the break
+        self.arm_pivot = np.zeros((0, 3))  # bone pivot - body COM, at the break
+        self.x = np.zeros((0, 3))  # body COM, m
+        self.v = np.zeros((0, 3))  # m/s
+        self.r = np.zeros((0, 3, 3))  # body rotation since the break
+        self.w = np.zeros((0, 3))  # rad/s, world
+        self.m = np.zeros(0)  # kg
+        self.i_body = np.zeros((0, 3, 3))  # kg m^2 about the COM, frame at the break
+        self.rest_time = np.zeros(0)  # s spent slow on the ground
+        self.asleep = np.zeros(0, dtype=bool)
+
+    @property
+    def count(self) -> int:
+        return len(self.m)
+
+    def add(self, bones: np.ndarray, pose: dict) -> None:
+        """Make one rigid body of `bones`, moving as they move in `pose`."""
+        rot = pose["rot"][bones]
+        com = pose["com"][bones]
+        m = self.mass[bones]
+        total = float(m.sum())
+        x = (m[:, None] * com).sum(0) / total
+        v_b = pose["vcom"][bones]
+        v = (m[:, None] * v_b).sum(0) / total
+        d = com - x
+        inertia_w = compose(compose(rot, self.inertia[bones]), np.transpose(rot, (0, 2, 1)))
+        eye = np.eye(3)
+        i_body = (inertia_w + m[:, None, None] * ((d * d).sum(1)[:, None, None] * eye
+                                                 - d[:, :, None] * d[:, None, :])).sum(0)
+        spin = np.einsum("bij,bj->bi", inertia_w, pose["omega"][bones])
+        momentum = (np.cross(d, m[:, None] * (v_b - v)) + spin).sum(0)
+        # A thin stick's inertia about its own axis is tiny; explicit steps
+        # would spin it up without bound from contact friction, so principal
+        # moments are floored at MIN_INERTIA_RATIO of the largest.
+        lam, vec = np.linalg.eigh(i_body)
+        lam = np.maximum(lam, MIN_INERTIA_RATIO * lam[-1])
+        i_body = (vec * lam) @ vec.T
+        w = np.linalg.solve(i_body, momentum)
+        k = self.count
+        self.bones = np.concatenate([self.bones, bones])
+        self.owner = np.concatenate([self.owner, np.full(len(bones), k)])
+        self.rot0 = np.concatenate([self.rot0, rot])
+        self.arm_pivot = np.concatenate([self.arm_pivot, pose["pivot"][bones] - x])
+        self.x = np.vstack([self.x, x])
+        self.v = np.vstack([self.v, v])
+        self.r = np.concatenate([self.r, eye[None]])
+        self.w = np.vstack([self.w, w])
+        self.m = np.append(self.m, total)
+        self.i_body = np.concatenate([self.i_body, i_body[None]])
+        self.rest_time = np.append(self.rest_time, 0.0)
+        self.asleep = np.append(self.asleep, False)
+
+    def loads(self, force: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per-body force and torque about the body COM from per-bone forces
+        (debris bones' rows of solver arrays, in `self.bones` order) acting
+        at `com`."""
+        n = self.count
+        f = np.stack([np.bincount(self.owner, force[:, a], minlength=n) for a in range(3)], 1)
+        tq = np.cross(com - self.x[self.owner], force)
+        t = np.stack([np.bincount(self.owner, tq[:, a], minlength=n) for a in range(3)], 1)
+        return f, t
+
+    def impulse(self, row: int, impulse: np.ndarray, point: np.ndarray) -> None:
+        """Apply a world impulse (N s) at a world point to the body of the
+        debris bone at `row` (of `self.bones`)."""
+        k = int(self.owner[row])
+        i_world = self.r[k] @ self.i_body[k] @ self.r[k].T
+        self.v[k] += impulse / self.m[k]
+        self.w[k] += np.linalg.solve(i_world, np.cross(point - self.x[k], impulse))
+        self.asleep[k] = False
+        self.rest_time[k] = 0.0
+
+    def bone_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Rotation (rel. rest), pivot, COM velocity and angular velocity of
+        every debris bone (in `self.bones` order)."""
+        r = self.r[self.owner]
+        rot = compose(r, self.rot0)
+        pivot = self.x[self.owner] + apply(r, self.arm_pivot)
+        com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
+        w = self.w[self.owner]
+        vcom = self.v[self.owner] + np.cross(w, com - self.x[self.owner])
+        return rot, pivot, vcom, w
+
+    def step(self, dt: float, force: np.ndarray, torque: np.ndarray) -> None:
+        """Advance all bodies by `dt` s under per-body `force` (N, gravity
+        included) and `torque` (N m, about the COM) held over the interval,
+        plus ground contact (re-evaluated every substep)."""
+        if not self.count:
+            return
+        h = dt / SUBSTEPS
+        awake = ~self.asleep
+        for _ in range(SUBSTEPS):
+            f = force.copy()
+            tq = torque.copy()
+            touching = np.zeros(self.count, dtype=bool)
+            if self.ground:
+                cf, ct, touching = self._contact(h)
+                f += cf
+                tq += ct
+            i_world = compose(compose(self.r, self.i_body), np.transpose(self.r, (0, 2, 1)))
+            gyro = np.cross(self.w, np.einsum("kij,kj->ki", i_world, self.w))
+            dw = np.linalg.solve(i_world, (tq - gyro)[..., None])[..., 0]
+            self.v[awake] += (f / self.m[:, None] * h)[awake]
+            self.w[awake] += (dw * h)[awake]
+            self.w[touching] *= np.exp(-ROLLING * h)
+            self.x[awake] += (self.v * h)[awake]
+            turn = matrices_from_rotvec(self.w * h)
+            self.r[awake] = compose(turn, self.r)[awake]
+            slow = touching & (np.linalg.norm(self.v, axis=1) < SLEEP_SPEED) & \
+                (np.linalg.norm(self.w, axis=1) < SLEEP_SPEED)
+            self.rest_time = np.where(slow, self.rest_time + h, 0.0)
+            newly = slow & (self.rest_time > SLEEP_TIME)
+            self.v[newly] = 0.0
+            self.w[newly] = 0.0
+            self.asleep |= newly
+            awake = ~self.asleep
+            if not awake.any():
+                return
+
+    def _contact(self, h: float):
+        """Ground forces and torques on each body from its bones' two ends."""
+        r = self.r[self.owner]
+        rot = compose(r, self.rot0)
+        pivot = self.x[self.owner] + apply(r, self.arm_pivot)
+        tip = pivot + apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
+        ends = np.concatenate([pivot, tip])
+        owner = np.concatenate([self.owner, self.owner])
+        radius = np.concatenate([self.radius[self.bones]] * 2)
+        arm = ends - self.x[owner]
+        vel = self.v[owner] + np.cross(self.w[owner], arm)
+        i_min = np.linalg.eigvalsh(self.i_body)[:, 0]
+        m_eff = effective_mass(self.m[owner], i_min[owner], arm)
+        f = ground_forces(ends, vel, radius, m_eff, h)
+        n = self.count
+        force = np.stack([np.bincount(owner, f[:, a], minlength=n) for a in range(3)], 1)
+        tq = np.cross(arm, f)
+        torque = np.stack([np.bincount(owner, tq[:, a], minlength=n) for a in range(3)], 1)
+        touching = np.bincount(owner, (f[:, 2] > 0).astype(float), minlength=n) > 0
+        return force, torque, touching

@@ -1,0 +1,108 @@
+"""Breaking, uprooting, felling and projectiles: what falls ends on the
+ground at rest, where it should."""
+
+import math
+
+import numpy as np
+from simkit import kinetic_energy, tip
+
+from exporter.pipeline import bake_scene
+from exporter.scene import parse_scene
+from exporter.sway import segment_ends
+
+WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
+
+
+def bake(tmp_path, grammar, **scene):
+    path = tmp_path / "g.lsys"
+    path.write_text(grammar)
+    raw = {"tree": [{"grammar": str(path)}], "fps": 24}
+    raw.update(scene)
+    return bake_scene(parse_scene(raw, file="<events>"))
+
+
+def at_rest(b, tail: float = 1.0) -> bool:
+    """Kinetic energy over the last `tail` seconds below 0.1 % of its peak."""
+    ke = kinetic_energy(b)
+    last = b.times[1:] > b.times[-1] - tail
+    return ke[last].max() < 1e-3 * ke.max()
+
+
+def test_felled_tree_falls_in_the_cut_direction_and_comes_to_rest(tmp_path, root):
+    grammar = (root / "grammars" / "sapling.lsys").read_text()
+    b = bake(tmp_path, grammar, duration=10.0,
+             cut=[{"tree": 0, "time": 0.5, "direction": 30.0}])
+    tree = b.trees[0]
+    height = tree.height
+    top = tip(tree)  # the leader's last segment
+    assert top[0, 2] > 0.9 * height
+    end = top[-1]
+    assert end[2] < 0.15 * height  # lying on the ground
+    assert math.degrees(math.atan2(end[1], end[0])) == pytest_approx(30.0, 12.0)
+    assert np.hypot(end[0], end[1]) > 0.7 * height
+    ends = segment_ends(tree, np.arange(tree.n_segments))[-1]
+    assert ends[:, 2].min() > -0.1  # nothing sank into the ground
+    assert at_rest(b)
+    assert any("hinge snapped" in e for e in tree.info["events"])
+
+
+def pytest_approx(value, tolerance):
+    import pytest
+
+    return pytest.approx(value, abs=tolerance)
+
+
+def test_overloaded_branch_breaks_falls_and_rests_on_the_ground(tmp_path):
+    """A heavy horizontal branch with a weak joint: the wind breaks it off;
+    the broken part lands and stops, the tree stands."""
+    grammar = (WOOD + "axiom: !(0.3)F(2)F(1)[&(85)!(0.12)@strength(550)F(1)@strength(0)"
+               "F(1)F(1)]F(1)\n")
+    b = bake(tmp_path, grammar, duration=8.0, prestress=True,
+             wind={"speed": 25.0, "turbulence": 0.2, "ramp": 0.5, "direction": 0.0})
+    tree = b.trees[0]
+    events = tree.info["events"]
+    assert any("broke" in e for e in events), events
+    ends = segment_ends(tree, np.arange(tree.n_segments))
+    branch = tree.seg_limb != tree.seg_limb[0]
+    trunk = ~branch
+    # the broken branch lies on the ground, the trunk still stands
+    assert ends[-1, branch, 2].max() < 0.4
+    assert ends[-1, trunk, 2].max() > 3.9
+    assert b.meta["stats"]["debris"] == 1
+    # the debris stopped moving: its last second is still
+    last = ends[-24:, branch]
+    assert np.abs(last - last[-1]).max() < 0.02
+
+
+def test_uprooted_tree_falls_downwind(tmp_path, root):
+    """A shallow root plate (anchor 3 kN m) in a storm: the root joint goes
+    and the tree ends up on the ground downwind."""
+    grammar = (root / "grammars" / "sapling.lsys").read_text().replace(
+        "anchor: 800", "anchor: 30").replace("rupture: 45e6", "")
+    b = bake(tmp_path, grammar, duration=8.0,
+             wind={"speed": 40.0, "turbulence": 0.2, "ramp": 1.0, "direction": 90.0})
+    tree = b.trees[0]
+    assert any("trunk:0" in e and "broke" in e for e in tree.info["events"]), \
+        tree.info["events"]
+    end = tip(tree)[-1]
+    assert end[2] < 0.5  # down
+    assert end[1] > 1.0  # downwind (+y)
+
+
+def test_projectile_and_tree_exchange_momentum(tmp_path):
+    """A 50 kg box thrown at 12 m/s into a 0.15 m stem: the box loses
+    speed (and bounces back), the stem is pushed along the throw."""
+    grammar = WOOD + "axiom: !(0.15)F(1)F(1)F(1)F(1)\n"
+    b = bake(tmp_path, grammar, duration=3.0, fps=120, projectile=[{
+        "shape": "box", "size": 0.4, "mass": 50.0, "position": [-3.0, 0.0, 2.5],
+        "velocity": [12.0, 0.0, 1.0], "time": 0.1, "restitution": 0.3}])
+    box = b.objects.positions[:, 0]
+    vx = np.diff(box[:, 0]) * b.fps
+    before = vx[(b.times[1:] > 0.15) & (b.times[1:] < 0.25)].mean()
+    after = vx[-30:].mean()
+    assert before > 10.0
+    assert after < 0.5 * before  # it hit something
+    top = tip(b.trees[0])
+    assert top[:, 0].max() > 0.05  # pushed along +x
+    # and it is the stem's stiffness, not a teleport: it swings back
+    assert top[:, 0].min() < 0.5 * top[:, 0].max()
