@@ -18,6 +18,7 @@ from .rig import RigOptions, build_rig
 from .rotations import apply, matrices_from_quaternions
 from .scene import QUALITIES, Quality, Scene
 from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
+from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
 from .sim.planar import PlanarSolver
 from .turtle import interpret
@@ -156,6 +157,9 @@ def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
                      f"{acc:.0f} m/s^2): the motion there is milder than the load asks")
     if stats.broken:
         notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
+    if stats.debris_clamped:
+        notes.append(f"debris spin clamped at {MAX_SPIN:.0f} rad/s on {stats.debris_clamped} "
+                     "body substeps")
     return notes
 
 

@@ -256,7 +256,9 @@ class _Reader:
         return tuple(float(x) for x in v)
 
 
-def load_scene(path: str | Path) -> Scene:
+def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
+    """Read and validate a scene file. `overrides` replace top-level keys
+    (and `wind.speed`) before validation, so they are checked the same way."""
     p = Path(path)
     try:
         data = p.read_bytes()
@@ -268,8 +270,18 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError("(file)", "not valid UTF-8", str(p)) from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError("(syntax)", str(exc), str(p)) from None
-    return parse_scene(raw, file=str(p), base=p.parent,
-                       source_hash=hashlib.sha256(data).hexdigest())
+    digest = hashlib.sha256(data)
+    if overrides:
+        raw = dict(raw)
+        for key, value in overrides.items():
+            if key == "wind.speed":
+                if isinstance(raw.get("wind"), dict):
+                    raw["wind"] = {k: v for k, v in raw["wind"].items() if k != "beaufort"}
+                    raw["wind"]["speed"] = value
+            else:
+                raw[key] = value
+        digest.update(repr(sorted(overrides.items())).encode())
+    return parse_scene(raw, file=str(p), base=p.parent, source_hash=digest.hexdigest())
 
 
 def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),

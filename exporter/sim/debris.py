@@ -18,7 +18,8 @@ SUBSTEPS = 4  # rigid-body steps per force update
 ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
 SLEEP_SPEED = 0.02  # m/s and rad/s below which a grounded body may sleep
 SLEEP_TIME = 0.5  # s at rest on the ground before it sleeps
-MIN_INERTIA_RATIO = 0.05  # smallest principal moment / largest
+MIN_INERTIA_RATIO = 0.1  # smallest principal moment / largest
+MAX_SPIN = 100.0  # rad/s: debris spin is clamped here (counted in `clamped`)
 
 
 class Debris:
@@ -40,6 +41,7 @@ class Debris:
         self.i_body = np.zeros((0, 3, 3))  # kg m^2 about the COM, frame at the break
         self.rest_time = np.zeros(0)  # s spent slow on the ground
         self.asleep = np.zeros(0, dtype=bool)
+        self.clamped = 0  # body substeps whose spin was clamped to MAX_SPIN
 
     @property
     def count(self) -> int:
@@ -113,17 +115,23 @@ class Debris:
         vcom = self.v[self.owner] + np.cross(w, com - self.x[self.owner])
         return rot, pivot, vcom, w
 
-    def step(self, dt: float, force: np.ndarray, torque: np.ndarray) -> None:
-        """Advance all bodies by `dt` s under per-body `force` (N, gravity
-        included) and `torque` (N m, about the COM) held over the interval,
-        plus ground contact (re-evaluated every substep)."""
+    def step(self, dt: float, loads) -> None:
+        """Advance all bodies by `dt` s. `loads(com, vcom, axis)` gives the
+        world force (N, gravity included) on each debris bone at its COM;
+        it and the ground contact are re-evaluated every substep (a light
+        leafy stick tumbling in a gale turns too fast for held loads)."""
         if not self.count:
             return
         h = dt / SUBSTEPS
-        awake = ~self.asleep
         for _ in range(SUBSTEPS):
-            f = force.copy()
-            tq = torque.copy()
+            awake = ~self.asleep
+            if not awake.any():
+                return
+            rot, pivot, vcom, _ = self.bone_poses()
+            com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
+            axis = apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
+            axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+            f, tq = self.loads(loads(com, vcom, axis), com)
             touching = np.zeros(self.count, dtype=bool)
             if self.ground:
                 cf, ct, touching = self._contact(h)
@@ -135,6 +143,11 @@ class Debris:
             self.v[awake] += (f / self.m[:, None] * h)[awake]
             self.w[awake] += (dw * h)[awake]
             self.w[touching] *= np.exp(-ROLLING * h)
+            spin = np.linalg.norm(self.w, axis=1)
+            fast = spin > MAX_SPIN
+            if fast.any():  # a tumbling stick faster than this is not physical: count it
+                self.w[fast] *= (MAX_SPIN / spin[fast])[:, None]
+                self.clamped += int(fast.sum())
             self.x[awake] += (self.v * h)[awake]
             turn = matrices_from_rotvec(self.w * h)
             self.r[awake] = compose(turn, self.r)[awake]
@@ -145,9 +158,6 @@ class Debris:
             self.v[newly] = 0.0
             self.w[newly] = 0.0
             self.asleep |= newly
-            awake = ~self.asleep
-            if not awake.any():
-                return
 
     def _contact(self, h: float):
         """Ground forces and torques on each body from its bones' two ends."""

@@ -89,6 +89,7 @@ class Stats:
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
     broken: int = 0
     debris: int = 0
+    debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
     notes: list[str] = field(default_factory=list)
 
 
@@ -498,10 +499,8 @@ class PlanarSolver:
         if self.projectiles is not None:  # impulses on hit bones, both ways
             self.projectiles.advance(t, dt, pose, self)
         if self.debris.count:
-            d = self.debris.bones
-            df, dtq = self.debris.loads(force[d], com[d])
-            self.debris.step(dt, df, dtq)
-            force[d] = 0.0
+            self.debris.step(dt, lambda c, v, ax: self._debris_loads(t, c, v, ax, dt))
+            force[self.debris.bones] = 0.0
         # Lumped: a body also carries the loads of the chains attached to it,
         # as if they were rigid: each acts where its COM would be if rigid.
         # (At their actual, swinging positions the parent would get the
@@ -555,6 +554,20 @@ class PlanarSolver:
         out[self.live_rows, 0] = fx[live]
         out[self.live_rows, 1] = fy[live]
         out[self.live_rows, 2] = tz[live]
+
+    def _debris_loads(self, t: float, com: np.ndarray, vcom: np.ndarray, axis: np.ndarray,
+                      dt: float) -> np.ndarray:
+        """Loads on the debris bones (gravity, air, blasts), capped."""
+        d = self.debris.bones
+        props = BoneProps(*(getattr(self.props, f)[d] for f in
+                            ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
+        force = self.loads.forces(t, com, vcom, axis, props)
+        acc = np.linalg.norm(force, axis=1) / np.maximum(self.mass[d], 1e-9)
+        over = acc > MAX_ACCELERATION
+        if over.any():
+            self.stats.limited += int(over.sum())
+            force[over] *= (MAX_ACCELERATION / acc[over])[:, None]
+        return force
 
     def _cap(self, force: np.ndarray, t: float) -> np.ndarray:
         """Cap each bone's external load at MAX_ACCELERATION x its mass.
@@ -912,6 +925,7 @@ class PlanarSolver:
             if progress is not None:
                 progress(f, frames - 1)
         self.stats.substeps = substep
+        self.stats.debris_clamped = self.debris.clamped
         out = []
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]

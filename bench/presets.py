@@ -1,0 +1,66 @@
+"""Bake every preset and report the cost: wall time, simulated seconds,
+segments, and microseconds per segment-step (simulated segments x substeps).
+
+    python bench/presets.py [--quality default] [--only NAME ...] [--json out/bench/presets.json]
+
+Timings are from one run on a shared machine: compare ratios, not absolutes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from exporter.fileio import write_text  # noqa: E402
+from exporter.pipeline import bake_scene  # noqa: E402
+from exporter.scene import QUALITIES, load_scene  # noqa: E402
+
+
+def bench(path: Path, quality: str | None) -> dict:
+    scene = load_scene(path, {"quality": quality} if quality else None)
+    started = time.perf_counter()
+    bake = bake_scene(scene)
+    wall = time.perf_counter() - started
+    t = bake.timing
+    simulated = [tb for tb in bake.trees if not tb.static]
+    steps = t.get("segment_steps", 0)
+    return {
+        "preset": path.stem, "quality": scene.quality.name, "trees": len(bake.trees),
+        "simulated_trees": len(simulated), "segments": sum(tb.n_segments for tb in bake.trees),
+        "simulated_segments": sum(tb.n_segments for tb in simulated),
+        "simulated_seconds": scene.duration, "wall_seconds": round(wall, 3),
+        "physics_seconds": round(t.get("step_seconds", 0) + t.get("update_seconds", 0), 3),
+        "us_per_segment_step": round(1e6 * wall / steps, 3) if steps else None,
+        "notes": bake.meta.get("notes", []),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quality", choices=tuple(QUALITIES))
+    ap.add_argument("--only", nargs="*", help="preset names")
+    ap.add_argument("--json", default=str(ROOT / "out" / "bench" / "presets.json"))
+    args = ap.parse_args()
+    rows = []
+    print(f"{'preset':<11} {'trees':>5} {'sim':>4} {'segments':>8} {'sim s':>6} {'wall s':>7} "
+          f"{'us/seg-step':>11}")
+    for path in sorted((ROOT / "presets").glob("*.toml")):
+        if args.only and path.stem not in args.only:
+            continue
+        r = bench(path, args.quality)
+        rows.append(r)
+        us = f"{r['us_per_segment_step']:.3f}" if r["us_per_segment_step"] else "-"
+        print(f"{r['preset']:<11} {r['trees']:>5} {r['simulated_trees']:>4} {r['segments']:>8} "
+              f"{r['simulated_seconds']:>6.1f} {r['wall_seconds']:>7.2f} {us:>11}", flush=True)
+    write_text(args.json, json.dumps(rows, indent=2) + "\n")
+    print(f"written {args.json}")
+
+
+if __name__ == "__main__":
+    main()
