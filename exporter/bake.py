@@ -66,10 +66,17 @@ class TreeBake:
 
 @dataclass
 class ObjectsBake:
+    """Projectiles: shape ("box" or "sphere"), size (box edge or sphere
+    diameter, m), and per frame world position (m) and rotation (x y z w)."""
+
     shapes: list[str]
     sizes: np.ndarray  # (P,) m
-    positions: np.ndarray  # (F, P, 3)
-    rotations: np.ndarray  # (F, P, 4) x y z w
+    positions: np.ndarray  # (F, P, 3) float32
+    rotations: np.ndarray  # (F, P, 4) float32, x y z w
+
+    def __post_init__(self):  # the saved precision, in memory too
+        self.positions = np.asarray(self.positions, dtype=np.float32)
+        self.rotations = np.asarray(self.rotations, dtype=np.float32)
 
 
 @dataclass

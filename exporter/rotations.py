@@ -29,6 +29,18 @@ def matrices_from_rotvec(rho: np.ndarray) -> np.ndarray:
     return r
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products of (..., 3) arrays (several times faster than np.cross,
+    which dominates small per-update workloads)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 def apply(r: np.ndarray, v: np.ndarray) -> np.ndarray:
     """r (N, 3, 3) times v (N, 3), written out so each row is computed alone."""
     return (r[:, :, 0] * v[:, 0:1] + r[:, :, 1] * v[:, 1:2] + r[:, :, 2] * v[:, 2:3])

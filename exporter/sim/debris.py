@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rotations import apply, compose, matrices_from_rotvec
+from ..rotations import apply, compose, cross, matrices_from_rotvec
 from .contact import effective_mass, ground_forces
 
-SUBSTEPS = 4  # rigid-body steps per force update
+MAX_STEP = 1 / 480  # s, the longest rigid-body step (a force update is split into these)
 ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
 SLEEP_SPEED = 0.02  # m/s and rad/s below which a grounded body may sleep
 SLEEP_TIME = 0.5  # s at rest on the ground before it sleeps
@@ -36,7 +36,8 @@ class Debris:
         self.x = np.zeros((0, 3))  # body COM, m
         self.v = np.zeros((0, 3))  # m/s
         self.r = np.zeros((0, 3, 3))  # body rotation since the break
-        self.w = np.zeros((0, 3))  # rad/s, world
+        self.w = np.zeros((0, 3))  # rad/s, world (follows from the angular momentum)
+        self.ang = np.zeros((0, 3))  # angular momentum about the COM, N m s, world
         self.m = np.zeros(0)  # kg
         self.i_body = np.zeros((0, 3, 3))  # kg m^2 about the COM, frame at the break
         self.rest_time = np.zeros(0)  # s spent slow on the ground
@@ -47,8 +48,9 @@ class Debris:
     def count(self) -> int:
         return len(self.m)
 
-    def add(self, bones: np.ndarray, pose: dict) -> None:
-        """Make one rigid body of `bones`, moving as they move in `pose`."""
+    def add(self, bones: np.ndarray, pose: dict, asleep: bool = False) -> None:
+        """Make one rigid body of `bones`, moving as they move in `pose`
+        (or, `asleep`, lying still until something hits it)."""
         rot = pose["rot"][bones]
         com = pose["com"][bones]
         m = self.mass[bones]
@@ -62,7 +64,7 @@ class Debris:
         i_body = (inertia_w + m[:, None, None] * ((d * d).sum(1)[:, None, None] * eye
                                                  - d[:, :, None] * d[:, None, :])).sum(0)
         spin = np.einsum("bij,bj->bi", inertia_w, pose["omega"][bones])
-        momentum = (np.cross(d, m[:, None] * (v_b - v)) + spin).sum(0)
+        momentum = (cross(d, m[:, None] * (v_b - v)) + spin).sum(0)
         # A thin stick's inertia about its own axis is tiny; explicit steps
         # would spin it up without bound from contact friction, so principal
         # moments are floored at MIN_INERTIA_RATIO of the largest.
@@ -79,10 +81,13 @@ class Debris:
         self.v = np.vstack([self.v, v])
         self.r = np.concatenate([self.r, eye[None]])
         self.w = np.vstack([self.w, w])
+        self.ang = np.vstack([self.ang, i_body @ w])
         self.m = np.append(self.m, total)
         self.i_body = np.concatenate([self.i_body, i_body[None]])
         self.rest_time = np.append(self.rest_time, 0.0)
-        self.asleep = np.append(self.asleep, False)
+        self.asleep = np.append(self.asleep, asleep)
+        if asleep:
+            self.v[-1] = self.w[-1] = self.ang[-1] = 0.0
 
     def loads(self, force: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-body force and torque about the body COM from per-bone forces
@@ -90,7 +95,7 @@ class Debris:
         at `com`."""
         n = self.count
         f = np.stack([np.bincount(self.owner, force[:, a], minlength=n) for a in range(3)], 1)
-        tq = np.cross(com - self.x[self.owner], force)
+        tq = cross(com - self.x[self.owner], force)
         t = np.stack([np.bincount(self.owner, tq[:, a], minlength=n) for a in range(3)], 1)
         return f, t
 
@@ -100,7 +105,8 @@ class Debris:
         k = int(self.owner[row])
         i_world = self.r[k] @ self.i_body[k] @ self.r[k].T
         self.v[k] += impulse / self.m[k]
-        self.w[k] += np.linalg.solve(i_world, np.cross(point - self.x[k], impulse))
+        self.ang[k] += cross(point - self.x[k], impulse)
+        self.w[k] = np.linalg.solve(i_world, self.ang[k])
         self.asleep[k] = False
         self.rest_time[k] = 0.0
 
@@ -112,7 +118,7 @@ class Debris:
         pivot = self.x[self.owner] + apply(r, self.arm_pivot)
         com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
         w = self.w[self.owner]
-        vcom = self.v[self.owner] + np.cross(w, com - self.x[self.owner])
+        vcom = self.v[self.owner] + cross(w, com - self.x[self.owner])
         return rot, pivot, vcom, w
 
     def step(self, dt: float, loads) -> None:
@@ -122,8 +128,9 @@ class Debris:
         leafy stick tumbling in a gale turns too fast for held loads)."""
         if not self.count:
             return
-        h = dt / SUBSTEPS
-        for _ in range(SUBSTEPS):
+        substeps = max(1, round(dt / MAX_STEP))
+        h = dt / substeps
+        for _ in range(substeps):
             awake = ~self.asleep
             if not awake.any():
                 return
@@ -137,16 +144,20 @@ class Debris:
                 cf, ct, touching = self._contact(h)
                 f += cf
                 tq += ct
-            i_world = compose(compose(self.r, self.i_body), np.transpose(self.r, (0, 2, 1)))
-            gyro = np.cross(self.w, np.einsum("kij,kj->ki", i_world, self.w))
-            dw = np.linalg.solve(i_world, (tq - gyro)[..., None])[..., 0]
+            # angular momentum, not velocity, is integrated: explicit Euler on
+            # Euler's equations (the gyroscopic term) gains energy for
+            # unequal principal moments; with L the free tumble is exact
             self.v[awake] += (f / self.m[:, None] * h)[awake]
-            self.w[awake] += (dw * h)[awake]
-            self.w[touching] *= np.exp(-ROLLING * h)
+            self.ang[awake] += (tq * h)[awake]
+            self.ang[touching] *= np.exp(-ROLLING * h)
+            i_world = compose(compose(self.r, self.i_body), np.transpose(self.r, (0, 2, 1)))
+            self.w = np.linalg.solve(i_world, self.ang[..., None])[..., 0]
             spin = np.linalg.norm(self.w, axis=1)
             fast = spin > MAX_SPIN
             if fast.any():  # a tumbling stick faster than this is not physical: count it
-                self.w[fast] *= (MAX_SPIN / spin[fast])[:, None]
+                scale = (MAX_SPIN / spin[fast])[:, None]
+                self.w[fast] *= scale
+                self.ang[fast] *= scale
                 self.clamped += int(fast.sum())
             self.x[awake] += (self.v * h)[awake]
             turn = matrices_from_rotvec(self.w * h)
@@ -157,6 +168,7 @@ class Debris:
             newly = slow & (self.rest_time > SLEEP_TIME)
             self.v[newly] = 0.0
             self.w[newly] = 0.0
+            self.ang[newly] = 0.0
             self.asleep |= newly
 
     def _contact(self, h: float):
@@ -169,13 +181,13 @@ class Debris:
         owner = np.concatenate([self.owner, self.owner])
         radius = np.concatenate([self.radius[self.bones]] * 2)
         arm = ends - self.x[owner]
-        vel = self.v[owner] + np.cross(self.w[owner], arm)
+        vel = self.v[owner] + cross(self.w[owner], arm)
         i_min = np.linalg.eigvalsh(self.i_body)[:, 0]
         m_eff = effective_mass(self.m[owner], i_min[owner], arm)
         f = ground_forces(ends, vel, radius, m_eff, h)
         n = self.count
         force = np.stack([np.bincount(owner, f[:, a], minlength=n) for a in range(3)], 1)
-        tq = np.cross(arm, f)
+        tq = cross(arm, f)
         torque = np.stack([np.bincount(owner, tq[:, a], minlength=n) for a in range(3)], 1)
         touching = np.bincount(owner, (f[:, 2] > 0).astype(float), minlength=n) > 0
         return force, torque, touching

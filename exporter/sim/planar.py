@@ -56,13 +56,14 @@ from ..rotations import (
     apply,
     apply_transposed,
     compose,
+    cross,
     matrices_from_rotvec,
     quaternions_from_matrices,
 )
 from ..scene import Quality, Scene
 from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, SimTree, TreeMotion
 from .contact import effective_mass, ground_forces
-from .debris import Debris
+from .debris import SLEEP_TIME, Debris
 from .loads import BoneProps, SceneLoads
 from .projectiles import Projectiles
 from .stability import chain_gaps, inertia_floor
@@ -70,6 +71,7 @@ from .stability import chain_gaps, inertia_floor
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
+SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
 
 
 @dataclass
@@ -183,7 +185,7 @@ class PlanarSolver:
                 norm = np.linalg.norm(chord)
                 d = chord / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
                 e = plane_direction(d, t.load_direction)
-                planes = [(e, d)] if t.planes == 1 else [(e, d), (np.cross(e, d), d)]
+                planes = [(e, d)] if t.planes == 1 else [(e, d), (cross(e, d), d)]
                 self.chain_planes.append(planes)
         self.chain_parent_arr = np.asarray(self.chain_parent, dtype=np.int64)
         self.bone_frame = self.chain_parent_arr[self.bone_chain] if self.n else \
@@ -271,7 +273,7 @@ class PlanarSolver:
         self.body_plane = np.asarray(body_plane, dtype=np.int64)
         self.body_e = np.asarray(e_rows).reshape(nb, 3)
         self.body_d = np.asarray(d_rows).reshape(nb, 3)
-        self.body_n = np.cross(self.body_e, self.body_d)
+        self.body_n = cross(self.body_e, self.body_d)
         self.planes_of_bone = np.maximum(np.bincount(self.body_bone, minlength=self.n), 1)
         self.body_of_bone0 = np.asarray([self.body_of[(b, 0)] for b in range(self.n)],
                                         dtype=np.int64)
@@ -452,7 +454,7 @@ class PlanarSolver:
             if has.any():
                 pp = p[has]
                 cog_p = pivot[pp] + apply(rot[pp], self.lump_cog0[pp] - self.pivot0[pp])
-                v[has] += vcog[pp] + np.cross(omega[pp], cog[has] - cog_p)
+                v[has] += vcog[pp] + cross(omega[pp], cog[has] - cog_p)
                 w[has] += omega[pp]
             vcog[bones] = v
             omega[bones] = w
@@ -462,7 +464,7 @@ class PlanarSolver:
             frame_rot[d] = EYE
         cog = pivot + apply(rot, self.lump_cog0 - self.pivot0)
         com = pivot + apply(rot, self.com0 - self.pivot0)
-        vcom = vcog + np.cross(omega, com - cog)
+        vcom = vcog + cross(omega, com - cog)
         if self.debris.count:
             vcom[d] = vcom_d
             vcog[d] = vcom_d  # debris bones carry no lumped children
@@ -507,11 +509,11 @@ class PlanarSolver:
         # gravity half of their reaction without the inertial half, a partial
         # coupling that pumps energy into hanging twigs.)
         ftot = force.copy()
-        torque = np.cross(com - cog, force)  # about each lumped COG
+        torque = cross(com - cog, force)  # about each lumped COG
         if len(self.pair_anc):
             a, d = self.pair_anc, self.pair_dsc
             rigid = pose["pivot"][a] + apply(rot[a], self.com0[d] - self.pivot0[a])
-            pair_torque = np.cross(rigid - cog[a], force[d])
+            pair_torque = cross(rigid - cog[a], force[d])
             for ax in range(3):
                 ftot[:, ax] += np.bincount(a, force[d, ax], minlength=n)
                 torque[:, ax] += np.bincount(a, pair_torque[:, ax], minlength=n)
@@ -532,9 +534,9 @@ class PlanarSolver:
             alpha = (pose["omega"][p] - prev["omega"][p]) / since
             w = pose["omega"][p]
             r = cog[child] - cog[p]
-            v_rel = pose["vcog"][child] - pose["vcog"][p] - np.cross(w, r)
-            a_frame = (acc + np.cross(alpha, r) + np.cross(w, np.cross(w, r))
-                       + 2 * np.cross(w, v_rel))
+            v_rel = pose["vcog"][child] - pose["vcog"][p] - cross(w, r)
+            a_frame = (acc + cross(alpha, r) + cross(w, cross(w, r))
+                       + 2 * cross(w, v_rel))
             f_b[moving] -= self.lump_mass[child][:, None] * a_frame
             n_world = apply(fr[moving], self.body_n[moving])
             t_b[moving] -= (self.i_n[moving] * (alpha * n_world).sum(1))[:, None] * n_world
@@ -612,7 +614,7 @@ class PlanarSolver:
         b = np.concatenate(bones)
         p = np.concatenate(points)
         fc = np.concatenate(forces)
-        tq = np.cross(p - cog[b], fc)
+        tq = cross(p - cog[b], fc)
         for ax in range(3):
             ftot[:, ax] += np.bincount(b, fc[:, ax], minlength=n)
             torque[:, ax] += np.bincount(b, tq[:, ax], minlength=n)
@@ -633,7 +635,7 @@ class PlanarSolver:
             return None
         ends, owner = ends[near], owner[near]
         arm = ends - pose["cog"][owner]
-        vel = pose["vcog"][owner] + np.cross(pose["omega"][owner], arm)
+        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
         f = ground_forces(ends, vel, self.radius[owner], m_eff, dt)
         return owner, ends, f
@@ -706,9 +708,27 @@ class PlanarSolver:
                 self.breakable[i] = False
             self.row_start[bone] = True
             self._layout()
+            self._fall_plane(self.chain_bones[self.bone_chain[bone]][freed[
+                self.chain_bones[self.bone_chain[bone]]]])
         else:
             self._to_debris(freed, pose)
         self._unload(freed)
+
+    def _fall_plane(self, bones: np.ndarray) -> None:
+        """A stem that falls free turns through a large angle: two planes
+        only combine small rotations, so from here it moves in its first
+        plane (the load's, or the felling direction) alone; the small
+        deflection it had in the other plane is dropped."""
+        for b in bones:
+            for k in range(1, self.planes_of_bone[b]):
+                i = self.body_of[(int(b), k)]
+                self._remove_joint(i)
+                self.breakable[i] = False
+                if self.in_space[i]:
+                    self.space.remove(self.bodies[i])
+                self.state[i] = [*self.q0[i], 0.0, 0.0, 0.0, 0.0]
+            self.planes_of_bone[b] = 1
+        self._buffers()
 
     def _outboard(self, bone: int) -> np.ndarray:
         """A bone and every bone it carries (later in its chain, and their
@@ -722,9 +742,9 @@ class PlanarSolver:
                 freed[b] = True
         return freed
 
-    def _to_debris(self, freed: np.ndarray, pose: dict) -> None:
+    def _to_debris(self, freed: np.ndarray, pose: dict, asleep: bool = False) -> None:
         bones = np.nonzero(freed & ~self.in_debris)[0]
-        self.debris.add(bones, pose)
+        self.debris.add(bones, pose, asleep)
         self.in_debris[bones] = True
         self.stats.debris += 1
         for b in bones:
@@ -773,6 +793,25 @@ class PlanarSolver:
             body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
             body.position = origin
 
+    def settle_fallen(self, t: float, pose: dict, dt: float) -> None:
+        """A tree whose stem is off its root (felled, uprooted) and that has
+        lain still for SLEEP_TIME becomes one sleeping rigid body: lying on
+        the ground it would otherwise keep the solver at contact rate."""
+        for ti in range(len(self.trees)):
+            bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
+            roots = bones[self.parent[bones] < 0]
+            awake = bones[~self.in_debris[bones]]
+            if self.joint_alive[roots].any() or not len(awake):
+                self.still_time[ti] = 0.0
+                continue
+            speed = max(np.abs(pose["vcom"][awake]).max(), np.abs(pose["omega"][awake]).max())
+            self.still_time[ti] = self.still_time[ti] + dt if speed < SETTLE_SPEED else 0.0
+            if self.still_time[ti] > SLEEP_TIME:
+                freed = np.zeros(self.n, dtype=bool)
+                freed[awake] = True
+                self._to_debris(freed, pose, asleep=True)
+                self.events.append((t, self.trees[ti].name, "came to rest on the ground"))
+
     def handle_cuts(self, t: float) -> None:
         """Felling: at the cut the root joints lose spring and cone (the
         hinge holds) and the tree is nudged toward the felling direction;
@@ -802,6 +841,7 @@ class PlanarSolver:
                         self.joint_alive[b] = False
                         for k in range(self.planes_of_bone[b]):
                             self._remove_joint(self.body_of[(b, k)])
+                        self._fall_plane(self.chain_bones[self.bone_chain[b]])
                     self.cut_state[ti] = "falling"
                     self.events.append((t, tree.name, "hinge snapped"))
 
@@ -866,6 +906,7 @@ class PlanarSolver:
         self.in_debris = np.zeros(n, dtype=bool)
         self.breakable = np.isfinite(self.strength[self.body_bone])
         self.pivot_alive = np.ones(len(self.bodies), dtype=bool)
+        self.still_time = np.zeros(len(self.trees))
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
                              self.radius, scene.ground)
         self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
@@ -921,6 +962,8 @@ class PlanarSolver:
             pivots[f] = pose_frame["pivot"]
             if self.projectiles is not None:
                 self.projectiles.record(f)
+            if self.felled:
+                self.settle_fallen(t, pose_frame, 1.0 / scene.fps)
             self.stats.update_seconds += time.perf_counter() - t0
             if progress is not None:
                 progress(f, frames - 1)
@@ -933,6 +976,12 @@ class PlanarSolver:
                       if name == tree.name]
             out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
         return out
+
+    @property
+    def felled(self) -> bool:
+        """Some tree's stem is off its root (cut or uprooted)."""
+        roots = self.parent < 0
+        return bool((roots & ~self.joint_alive & ~self.in_debris).any())
 
     @property
     def cut_list(self) -> bool:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rotations import cross
 from ..scene import Scene
 
 
@@ -127,7 +128,7 @@ class Projectiles:
         normal = cp[k] - cq[k]
         nn = np.linalg.norm(normal)
         normal = normal / nn if nn > 1e-9 else -v / max(np.linalg.norm(v), 1e-9)
-        v_bone = pose["vcog"][bone] + np.cross(pose["omega"][bone], point - pose["cog"][bone])
+        v_bone = pose["vcog"][bone] + cross(pose["omega"][bone], point - pose["cog"][bone])
         rel = v - v_bone
         vn = rel @ normal
         if vn >= 0:
@@ -141,7 +142,7 @@ class Projectiles:
         impulse = jn * normal + jt  # on the projectile
         v = v + impulse / self.mass[i]
         r = -normal * self.radius[i]
-        self.spin[i] += np.cross(r, jt) / self.inertia[i]
+        self.spin[i] += cross(r, jt) / self.inertia[i]
         solver.apply_impulse(bone, -impulse, point + normal * solver.radius[bone], pose)
         self.hits += 1
         return float(s[k]), v
