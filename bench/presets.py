@@ -17,9 +17,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from exporter.fileio import write_text  # noqa: E402
-from exporter.pipeline import bake_scene  # noqa: E402
-from exporter.scene import QUALITIES, load_scene  # noqa: E402
+from exporter.fileio import write_text
+from exporter.pipeline import bake_scene
+from exporter.scene import QUALITIES, load_scene
 
 
 def bench(path: Path, quality: str | None) -> dict:

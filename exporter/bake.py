@@ -132,28 +132,28 @@ def _json_array(obj) -> np.ndarray:
 
 def save_bake(bake: Bake, path: str | Path) -> Path:
     """Write `bake` atomically; identical bakes give identical bytes."""
-    with atomic_path(path) as tmp:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-            meta = dict(bake.meta, format_version=FORMAT_VERSION, trees=len(bake.trees))
-            _add(zf, "meta", _json_array(meta))
-            _add(zf, "times", bake.times.astype(np.float64))
-            for i, t in enumerate(bake.trees):
-                p = f"tree{i}."
-                _add(zf, p + "info", _json_array(dict(t.info, name=t.name, paths=t.paths)))
-                for key in ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width",
-                            "leaf", "leaf_size", "limb_parent", "limb_attach", "positions",
-                            "rotations"):
-                    _add(zf, p + key, getattr(t, key))
-                lengths = np.asarray([len(lp) for lp in t.limb_points], dtype=np.int64)
-                flat = np.concatenate(t.limb_points) if t.limb_points else np.zeros(0, np.int64)
-                _add(zf, p + "limb_point_counts", lengths)
-                _add(zf, p + "limb_points", flat)
-            if bake.objects is not None:
-                o = bake.objects
-                _add(zf, "objects.info", _json_array({"shapes": o.shapes}))
-                _add(zf, "objects.sizes", o.sizes)
-                _add(zf, "objects.positions", o.positions.astype(np.float32))
-                _add(zf, "objects.rotations", o.rotations.astype(np.float32))
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w",
+                                                   compression=zipfile.ZIP_DEFLATED) as zf:
+        meta = dict(bake.meta, format_version=FORMAT_VERSION, trees=len(bake.trees))
+        _add(zf, "meta", _json_array(meta))
+        _add(zf, "times", bake.times.astype(np.float64))
+        for i, t in enumerate(bake.trees):
+            p = f"tree{i}."
+            _add(zf, p + "info", _json_array(dict(t.info, name=t.name, paths=t.paths)))
+            for key in ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width",
+                        "leaf", "leaf_size", "limb_parent", "limb_attach", "positions",
+                        "rotations"):
+                _add(zf, p + key, getattr(t, key))
+            lengths = np.asarray([len(lp) for lp in t.limb_points], dtype=np.int64)
+            flat = np.concatenate(t.limb_points) if t.limb_points else np.zeros(0, np.int64)
+            _add(zf, p + "limb_point_counts", lengths)
+            _add(zf, p + "limb_points", flat)
+        if bake.objects is not None:
+            o = bake.objects
+            _add(zf, "objects.info", _json_array({"shapes": o.shapes}))
+            _add(zf, "objects.sizes", o.sizes)
+            _add(zf, "objects.positions", o.positions.astype(np.float32))
+            _add(zf, "objects.rotations", o.rotations.astype(np.float32))
     return Path(path)
 
 

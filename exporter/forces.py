@@ -99,12 +99,12 @@ class Wind:
         across = corners @ self.cross[:2]
         self._along0 = float(along.min())
         travel = (along.max() - along.min()) / self.speed
-        count = int(math.ceil((duration + travel + 10.0) / dt))
+        count = math.ceil((duration + travel + 10.0) / dt)
         count += count % 2
         lateral = self.length_scale / 3
         self._cross0 = float(across.min())
         self._lane = lateral
-        lanes = int(math.ceil((across.max() - across.min()) / lateral)) + 2
+        lanes = math.ceil((across.max() - across.min()) / lateral) + 2
         sigma_u = self.turbulence * self.speed
         comps = ((sigma_u, self.length_scale), (0.8 * sigma_u, self.length_scale / 3),
                  (0.5 * sigma_u, self.length_scale / 12))

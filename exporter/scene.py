@@ -179,7 +179,7 @@ class Scene:
 
     @property
     def frame_count(self) -> int:
-        return int(round(self.duration * self.fps)) + 1
+        return round(self.duration * self.fps) + 1
 
 
 # ---------------------------------------------------------------------------
@@ -338,6 +338,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
             r.number(v, "time", p, 0.0, 0.0, 3600.0), r.number(v, "end", p, math.inf, 0.0),
             r.number(v, "inflow", p, 0.5, 0.0, 2.0), r.number(v, "updraft", p, 0.5, 0.0, 2.0),
             r.boolean(v, "clockwise", p, False)))
+        _check_interval(r, scene.vortices[-1], p)
     for i, a in enumerate(_array(r, raw, "attractor")):
         p = f"attractor[{i}]."
         r.check_keys(a, p, {"position", "strength", "radius", "time", "end"})
@@ -345,6 +346,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
             r.vector(a, "position", p, 3), r.number(a, "strength", p, None, -1000.0, 1000.0),
             r.number(a, "radius", p, 1.0, 0.01, 1000.0), r.number(a, "time", p, 0.0, 0.0),
             r.number(a, "end", p, math.inf, 0.0)))
+        _check_interval(r, scene.attractors[-1], p)
     for i, b in enumerate(_array(r, raw, "projectile")):
         p = f"projectile[{i}]."
         r.check_keys(b, p, {"shape", "size", "mass", "position", "velocity", "time",
@@ -375,6 +377,11 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     if "camera" in raw:
         scene.camera = _camera(r, r.table(raw["camera"], "camera"))
     return scene
+
+
+def _check_interval(r: _Reader, spec, p: str) -> None:
+    if spec.end < spec.time:
+        raise r.fail(f"{p}end", f"= {spec.end:g} s is before time ({spec.time:g} s)")
 
 
 def _array(r: _Reader, raw: dict, key: str) -> list[dict]:
@@ -480,7 +487,7 @@ def _scatter(rng: np.random.Generator, count: int, area, spacing: float) -> list
         attempts += 1
         x, y = rng.uniform(-w / 2, w / 2), rng.uniform(-h / 2, h / 2)
         if spacing > 0:
-            gx, gy = int(math.floor(x / cell)), int(math.floor(y / cell))
+            gx, gy = math.floor(x / cell), math.floor(y / cell)
             ok = True
             for dx in range(-2, 3):
                 for dy in range(-2, 3):
@@ -511,7 +518,7 @@ def _wind(r: _Reader, w: dict) -> WindSpec:
         speed = 0.5 * (BEAUFORT[name] + hi)
     else:
         speed = r.number(w, "speed", p, None, 0.0, 120.0)
-    return WindSpec(
+    spec = WindSpec(
         speed=speed,
         direction=r.number(w, "direction", p, 0.0, -360.0, 360.0),
         reference_height=r.number(w, "reference_height", p, 10.0, 1.0, 500.0),
@@ -522,6 +529,9 @@ def _wind(r: _Reader, w: dict) -> WindSpec:
         ramp=r.number(w, "ramp", p, 2.0, 0.0, 600.0),
         end=r.number(w, "end", p, math.inf, 0.0),
     )
+    if spec.end < spec.start:
+        raise r.fail(f"{p}end", f"= {spec.end:g} s is before start ({spec.start:g} s)")
+    return spec
 
 
 def _camera(r: _Reader, c: dict) -> CameraSpec:

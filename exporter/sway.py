@@ -7,6 +7,7 @@ simulator (a scene `[[pull]]`) and read the free decay of the trunk's top.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +53,7 @@ def damping_ratio(t: np.ndarray, x: np.ndarray, cycles: int = 3) -> float:
     y = x - float(np.mean(x[len(x) // 2:]))
     z = _crossings(t, y)
     peaks = []
-    for a, b in zip(z[:-1], z[1:]):
+    for a, b in itertools.pairwise(z):
         sel = (t >= a) & (t <= b)
         if sel.any():
             peaks.append(float(np.abs(y[sel]).max()))
@@ -76,8 +77,8 @@ class SwayResult:
 
 
 def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "default",
-                 deflection: float = 0.01, at: float = 0.6, release: float = 4.0,
-                 duration: float = 16.0, fps: float = 120.0) -> SwayResult:
+                 deflection: float = 0.01, at: float = 0.6, release: float = 3.0,
+                 duration: float = 12.0, fps: float = 60.0) -> SwayResult:
     """Pull the trunk at `at` x height until its top has moved about
     `deflection` x height, release at `release` s, and measure the free
     sway of the trunk top in the pull's direction (still air, gravity on)."""

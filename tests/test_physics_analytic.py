@@ -2,6 +2,7 @@
 Euler-Bernoulli cantilever, the static beam, the drag law and the Kaimal
 gust spectrum."""
 
+import itertools
 import math
 
 import numpy as np
@@ -163,7 +164,7 @@ def test_gust_series_has_the_kaimal_statistics():
     psd = np.mean(spectra, axis=0)
     # compare in octave bands from 0.01 Hz to 5 Hz
     edges = 0.01 * 2.0 ** np.arange(0, 9)
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in itertools.pairwise(edges):
         band = (freqs >= lo) & (freqs < hi)
         model = kaimal_spectrum(freqs[band], sigma, length, mean)
         assert psd[band].mean() == pytest.approx(model.mean(), rel=0.1)

@@ -42,6 +42,7 @@ docs/physics.md has the derivations and the measurements behind each choice.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,7 +52,6 @@ import pymunk
 from pymunk import batch
 
 from ..errors import SimulationError
-from ..rig import subtree_sums
 from ..rotations import (
     apply,
     apply_transposed,
@@ -108,6 +108,20 @@ def plane_direction(d: np.ndarray, load: np.ndarray | None) -> np.ndarray:
     raise AssertionError("no perpendicular found")  # pragma: no cover
 
 
+def apparent_mass(r: float, zeta: float) -> float:
+    """The in-phase (real) part of the apparent mass of a damped oscillator
+    driven at its base, per unit of its mass, at r = driving frequency /
+    its own frequency: ((1 - r^2) + 4 zeta^2 r^2) / ((1 - r^2)^2 + 4 zeta^2 r^2),
+    clipped to [1, 3]. Above 1 when the child is stiffer than the motion (it
+    sways along, amplified): the one-way coupling's stand-in for the
+    children's push back. A softer child would lag behind (below 1), but
+    its frequency estimate ignores gravity's pendulum stiffness (hanging
+    twigs), so it is carried as rigid instead."""
+    q = 1.0 - r * r
+    z = 4.0 * zeta * zeta * r * r
+    return float(np.clip((q + z) / (q * q + z), 1.0, 3.0))
+
+
 def _cat(trees: list[SimTree], get) -> np.ndarray:
     return np.concatenate([np.asarray(get(t)) for t in trees]) if trees else np.zeros(0)
 
@@ -121,9 +135,9 @@ class PlanarSolver:
         self.log = log or (lambda msg: None)
         self.stats = Stats()
         fps = scene.fps
-        self.spf = max(1, int(round(quality.substep_rate / fps)))  # substeps per frame
+        self.spf = max(1, round(quality.substep_rate / fps))  # substeps per frame
         self.h = 1.0 / (fps * self.spf)
-        want = max(1, int(round(quality.substep_rate / quality.force_rate)))
+        want = max(1, round(quality.substep_rate / quality.force_rate))
         divisors = [d for d in range(1, self.spf + 1) if self.spf % d == 0]
         self.update_every = min(divisors, key=lambda d: (abs(d - want), d))
         self.dt_update = self.h * self.update_every
@@ -188,40 +202,65 @@ class PlanarSolver:
                 planes = [(e, d)] if t.planes == 1 else [(e, d), (cross(e, d), d)]
                 self.chain_planes.append(planes)
         self.chain_parent_arr = np.asarray(self.chain_parent, dtype=np.int64)
+        self.chain_first = np.asarray([b[0] for b in self.chain_bones], dtype=np.int64)
         self.bone_frame = self.chain_parent_arr[self.bone_chain] if self.n else \
             np.zeros(0, dtype=np.int64)  # the bone whose frame a bone's chain moves in
 
     def _lumping(self) -> None:
-        """Lumped bodies (a bone plus the chains attached to it, rigid), and
-        the pairs (attach bone, descendant bone) that carry loads up."""
+        """Lumped bodies: a bone plus the chains attached to it, carried as
+        if rigid. Each pair (attach bone a, descendant d) adds d to a's lump:
+        its true mass for gravity and the prestress; for inertia, its mass
+        times the apparent-mass factor of the child chain it hangs in
+        (apparent_mass), so a soft crown slows the stem as it does when it
+        sways along."""
+        omega = np.concatenate([t.rig.limb_omega for t in self.trees]) if self.trees else \
+            np.zeros(0)
+        zeta = self.alpha[self.chain_first] / np.maximum(2 * omega, 1e-9)
+        factor = np.ones(len(self.chain_bones))
+        for ci, p in enumerate(self.chain_parent):
+            if p >= 0:
+                r = omega[self.bone_chain[p]] / max(omega[ci], 1e-9)
+                factor[ci] = apparent_mass(r, zeta[ci])
+        anc, dsc, via = [], [], []
+        for b in range(self.n):
+            below, p = b, self.bone_frame[b]
+            while p >= 0:
+                anc.append(p)
+                dsc.append(b)
+                via.append(self.bone_chain[below])
+                below, p = p, self.bone_frame[p]
+        order = np.lexsort((dsc, anc))
+        self.pair_anc = np.asarray(anc, dtype=np.int64)[order]
+        self.pair_dsc = np.asarray(dsc, dtype=np.int64)[order]
+        self.pair_weight = factor[np.asarray(via, dtype=np.int64)[order]] if anc else np.zeros(0)
+        self.chain_factor = factor
+        self._lump()
+
+    def _lump(self) -> None:
+        """Lumped masses, COGs and inertias from the current pairs."""
         n, m, c = self.n, self.mass, self.com0
+        a, d, w = self.pair_anc, self.pair_dsc, self.pair_weight
+
+        def add(own: np.ndarray, each: np.ndarray, weight: np.ndarray) -> np.ndarray:
+            flat = each.reshape(len(each), -1) * weight[:, None]
+            out = own.reshape(n, -1).copy()
+            for k in range(out.shape[1]):
+                out[:, k] += np.bincount(a, flat[:, k], minlength=n)
+            return out.reshape(own.shape)
+
+        ones = np.ones(len(a))
+        self.true_mass = add(m, m[d], ones)
+        self.true_cog0 = add(m[:, None] * c, m[d, None] * c[d], ones) / self.true_mass[:, None]
+        lm = add(m, m[d], w)
+        lmc = add(m[:, None] * c, m[d, None] * c[d], w)
         j_own = self.inertia + m[:, None, None] * (
             (c * c).sum(1)[:, None, None] * EYE - c[:, :, None] * c[:, None, :])
-        sub_m = subtree_sums(self.parent, m)
-        sub_mc = subtree_sums(self.parent, m[:, None] * c)
-        sub_j = subtree_sums(self.parent, j_own.reshape(n, 9)).reshape(n, 3, 3)
-        lm, lmc, lj = m.copy(), m[:, None] * c, j_own.copy()
-        for bones, p in zip(self.chain_bones, self.chain_parent):
-            if p >= 0:
-                b = bones[0]
-                lm[p] += sub_m[b]
-                lmc[p] += sub_mc[b]
-                lj[p] += sub_j[b]
+        lj = add(j_own, j_own[d], w)
         self.lump_mass = lm
         self.lump_cog0 = lmc / lm[:, None]
         g = self.lump_cog0
         self.lump_inertia = lj - lm[:, None, None] * (
             (g * g).sum(1)[:, None, None] * EYE - g[:, :, None] * g[:, None, :])
-        anc, dsc = [], []
-        for b in range(n):
-            p = self.bone_frame[b]
-            while p >= 0:
-                anc.append(p)
-                dsc.append(b)
-                p = self.bone_frame[p]
-        order = np.lexsort((dsc, anc))
-        self.pair_anc = np.asarray(anc, dtype=np.int64)[order]
-        self.pair_dsc = np.asarray(dsc, dtype=np.int64)[order]
 
     def _levels(self) -> None:
         """Chains grouped by depth, for the 3D reconstruction level by level."""
@@ -229,7 +268,6 @@ class PlanarSolver:
         for p in self.chain_parent:
             depth.append(0 if p < 0 else depth[self.bone_chain[p]] + 1)
         self.chain_depth = np.asarray(depth, dtype=np.int64)
-        self.chain_first = np.asarray([b[0] for b in self.chain_bones], dtype=np.int64)
         self.row_start = np.zeros(self.n, dtype=bool)  # a bone starts a (sub)chain row
         self.row_start[self.chain_first] = True
         self._layout()
@@ -292,10 +330,10 @@ class PlanarSolver:
         prev = np.full(nb, -1, dtype=np.int64)
         for ci, bones in enumerate(self.chain_bones):
             for k in range(len(self.chain_planes[ci])):
-                for a, b in zip(bones[:-1], bones[1:]):
+                for a, b in itertools.pairwise(bones):
                     prev[self.body_of[(int(b), k)]] = self.body_of[(int(a), k)]
         self.prev_body = prev
-        self.rest = self._prestress(lm) if self.scene.prestress else np.zeros(nb)
+        self.rest = self._prestress() if self.scene.prestress else np.zeros(nb)
         # stability rule: floor each body's rotary inertia by its stiffest joint
         kb = self.k[self.body_bone]
         k_max = kb.copy()
@@ -341,7 +379,7 @@ class PlanarSolver:
         self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
         self._buffers()
 
-    def _prestress(self, lm: np.ndarray) -> np.ndarray:
+    def _prestress(self) -> np.ndarray:
         """Spring rest angles that hold every chain in its grown shape under
         gravity: each joint's rest angle is the gravity torque of everything
         outboard of it (lumped) over k. DampedRotarySpring drives
@@ -349,11 +387,16 @@ class PlanarSolver:
         g = self.loads.g
         rest = np.zeros(len(self.body_bone))
         g2d = np.stack([self.body_e @ g, self.body_d @ g], 1)
+        first = self.chain_first[self.bone_chain[self.body_bone]]
+        origin = self.pivot0[first]
+        rel = self.true_cog0[self.body_bone] - origin
+        cog2d = np.stack([(rel * self.body_e).sum(1), (rel * self.body_d).sum(1)], 1)
+        lm = self.true_mass[self.body_bone]
         for ci, bones in enumerate(self.chain_bones):
             for k in range(len(self.chain_planes[ci])):
                 idx = np.asarray([self.body_of[(int(b), k)] for b in bones])
                 fx, fy = lm[idx] * g2d[idx, 0], lm[idx] * g2d[idx, 1]
-                cx, cy = self.cog2d0[idx, 0], self.cog2d0[idx, 1]
+                cx, cy = cog2d[idx, 0], cog2d[idx, 1]
                 sfx = np.cumsum(fx[::-1])[::-1]
                 sfy = np.cumsum(fy[::-1])[::-1]
                 smo = np.cumsum((cx * fy - cy * fx)[::-1])[::-1]
@@ -696,7 +739,7 @@ class PlanarSolver:
         falls on as a free planar chain; elsewhere the broken-off part (with
         everything it carries) becomes rigid debris."""
         self.joint_alive[bone] = False
-        tree, seg = self.locate(bone)
+        tree = self.locate(bone)[0]
         path = self.bone_path(bone)
         self.events.append((t, tree, f"{path}: {why}"))
         self.stats.broken += 1
@@ -762,20 +805,14 @@ class PlanarSolver:
         keep = ~(freed[self.pair_dsc] & ~freed[self.pair_anc])
         changed = np.unique(self.pair_anc[~keep])
         self.pair_anc, self.pair_dsc = self.pair_anc[keep], self.pair_dsc[keep]
+        self.pair_weight = self.pair_weight[keep]
+        self._lump()
         for a in changed:
             self._relump(int(a))
 
     def _relump(self, bone: int) -> None:
-        """Recompute a body's lumped mass after part of what it carried went."""
-        sel = np.concatenate([[bone], self.pair_dsc[self.pair_anc == bone]])
-        m, c = self.mass[sel], self.com0[sel]
-        total = m.sum()
-        cog = (m[:, None] * c).sum(0) / total
-        d = c - cog
-        inertia = (self.inertia[sel] + m[:, None, None] * (
-            (d * d).sum(1)[:, None, None] * EYE - d[:, :, None] * d[:, None, :])).sum(0)
-        self.lump_mass[bone], self.lump_cog0[bone] = total, cog
-        self.lump_inertia[bone] = inertia
+        """Give a body its new lumped mass after part of what it carried went."""
+        cog, total = self.lump_cog0[bone], self.lump_mass[bone]
         for k in range(self.planes_of_bone[bone]):
             i = self.body_of[(bone, k)]
             body = self.bodies[i]
@@ -783,7 +820,7 @@ class PlanarSolver:
             origin2d = self.pivot0[self.chain_first[self.bone_chain[bone]]]
             c2 = np.array([(cog - origin2d) @ e, (cog - origin2d) @ dd])
             floored = self.i_eff[i] > self.i_n[i]
-            self.i_n[i] = float(self.body_n[i] @ inertia @ self.body_n[i])
+            self.i_n[i] = float(self.body_n[i] @ self.lump_inertia[bone] @ self.body_n[i])
             if not floored:
                 self.i_eff[i] = self.i_n[i]
             self.body_mass[i] = total

@@ -116,7 +116,7 @@ class Projectiles:
         if not len(near):
             return None
         m = len(near)
-        s, u, dist, cp, cq = closest_segment_points(np.repeat(a[None], m, 0),
+        s, _, dist, cp, cq = closest_segment_points(np.repeat(a[None], m, 0),
                                                     np.repeat(b[None], m, 0), piv[near], tip[near])
         touching = dist < solver.radius[near] + self.radius[i]
         if not touching.any():
