@@ -17,10 +17,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from test_physics_realism import BANDS  # noqa: E402
+from test_physics_realism import BANDS
 
-from exporter.fileio import write_text  # noqa: E402
-from exporter.sway import pull_release  # noqa: E402
+from exporter.fileio import write_text
+from exporter.sway import pull_release
 
 
 def main() -> None:

@@ -102,7 +102,7 @@ def cmd_inspect(args) -> int:
     return 0
 
 
-def load_job(path: str, args) -> "Scene":
+def load_job(path: str, args):
     """A scene file, or a grammar baked alone in a default scene (a gusty
     moderate breeze unless --wind says otherwise). Command-line overrides
     are validated like the file's own keys."""
@@ -132,15 +132,24 @@ def cmd_bake(args) -> int:
     progress = None if args.quiet else _progress_bar("simulating")
     bake = bake_scene(scene, solver=args.solver, log=log, progress=progress)
     path = save_bake(bake, out / f"{out.name}.npz")
+    exported = None
+    if args.format is None and scene.formats:
+        args.format = ",".join(f for f in scene.formats if f != "npz")
+    if args.format:
+        exported = _run_export(bake, path, args.out, out.name, _export_options(args), args)
     t = bake.timing
     summary = {"bake": str(path), "trees": len(bake.trees),
                "simulated": sum(1 for tb in bake.trees if not tb.static),
                "segments": sum(tb.n_segments for tb in bake.trees),
                "frames": len(bake.times), "notes": bake.meta.get("notes", []),
                "wall_seconds": t.get("wall_seconds")}
+    if exported is not None:
+        summary["export"] = _export_summary(exported)
     if args.json:
         print(json.dumps(summary))
     else:
+        if exported is not None:
+            _print_export(exported)
         print(f"baked {summary['trees']} trees ({summary['simulated']} simulated, "
               f"{summary['segments']} segments), {summary['frames']} frames in "
               f"{summary['wall_seconds']:.1f} s -> {path}")
@@ -165,6 +174,204 @@ def _progress_bar(label: str):
         sys.stderr.flush()
 
     return show
+
+
+def _add_export_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("export options")
+    g.add_argument("--split", action="store_true", help="glTF: one file per tree")
+    g.add_argument("--no-leaves", action="store_true", help="no leaf quads")
+    g.add_argument("--radial", type=int, default=8, help="vertices around a bark ring (3-64)")
+    g.add_argument("--rings", type=int, default=1, help="bark rings per segment (1-16)")
+    g.add_argument("--position-tolerance", type=float, default=0.002,
+                   help="keyframe reduction: worst joint/tip position error, m (default 0.002)")
+    g.add_argument("--angle-tolerance", type=float, default=0.25,
+                   help="keyframe reduction: worst joint rotation error, degrees (default 0.25)")
+    g.add_argument("--no-reduce", action="store_true",
+                   help="keep every frame of every channel that changes")
+    g.add_argument("--stride", type=int, default=1, help="OBJ sequences: every n-th frame")
+    g.add_argument("--size", type=int, default=256, help="preview panel size, px")
+
+
+def _export_options(args):
+    import math
+
+    from .exchange.anim import ReduceOptions
+    from .exchange.mesh import MeshOptions
+    from .export import ExportOptions, parse_formats
+
+    return ExportOptions(
+        formats=parse_formats(getattr(args, "format", None) or "glb"),
+        mesh=MeshOptions(radial=args.radial, rings=args.rings, leaves=not args.no_leaves),
+        reduce=ReduceOptions(position_tolerance=args.position_tolerance,
+                             angle_tolerance=math.radians(args.angle_tolerance),
+                             enabled=not args.no_reduce),
+        split=args.split, obj_stride=args.stride, preview_size=args.size)
+
+
+def _stage_progress():
+    """Progress on stderr for export stages (only when it is a terminal)."""
+    if not sys.stderr.isatty():
+        return None
+    start = time.perf_counter()
+
+    def show(stage: str, done: int, total: int) -> None:
+        width = 30
+        filled = int(width * done / max(total, 1))
+        sys.stderr.write(f"\rexporting {stage:<7} [{'#' * filled}{'.' * (width - filled)}] "
+                         f"{done}/{total}  {time.perf_counter() - start:5.1f} s ")
+        if done >= total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return show
+
+
+def _run_export(bake, bake_path, out, name, opts, args):
+    from .export import export_bake
+
+    progress = None if getattr(args, "quiet", False) else _stage_progress()
+    return export_bake(bake, out, name, opts, bake_path=bake_path, progress=progress)
+
+
+def _export_summary(report) -> dict:
+    m = report.manifest
+    return {"folder": str(report.folder), "files": len(m["files"]),
+            "bytes": m["total_bytes"], "animation": m.get("animation", {}),
+            "sizes": m["sizes"]}
+
+
+def _print_export(report) -> None:
+    m = report.manifest
+    a = m.get("animation")
+    print(f"exported {len(m['files'])} files, {m['total_bytes'] / 1e6:.1f} MB -> "
+          f"{report.folder} (manifest.json)")
+    if a and a.get("keys_full"):
+        print(f"keyframes: {a['keys_written']:,} of {a['keys_full']:,} written "
+              f"({100 * a['keys_kept_fraction']:.1f} %), {a['channels_written']:,} of "
+              f"{a['channels']:,} channels; worst error {a['max_position_error_m'] * 1e3:.3g} mm, "
+              f"{a['max_angle_error_deg']:.3g} deg")
+
+
+def cmd_export(args) -> int:
+    from .bake import load_bake
+
+    path = Path(args.bake)
+    if not path.is_file():
+        raise InputError(f"{path}: bake file not found")
+    opts = _export_options(args)
+    bake = load_bake(path)
+    report = _run_export(bake, path, args.out, args.name, opts, args)
+    if args.json:
+        print(json.dumps(_export_summary(report)))
+    else:
+        _print_export(report)
+    return 0
+
+
+def cmd_preview(args) -> int:
+    from .bake import load_bake
+    from .export import write_previews
+
+    path = Path(args.bake)
+    if not path.is_file():
+        raise InputError(f"{path}: bake file not found")
+    if not 64 <= args.size <= 2048:
+        raise InputError(f"--size must be in 64..2048 px, got {args.size}")
+    bake = load_bake(path)
+    name = args.name or str(bake.meta.get("scene") or path.stem)
+    stage = None if args.quiet else _stage_progress()
+    progress = None if stage is None else (lambda d, t: stage("preview", d, t))
+    files = write_previews(bake, Path(args.out) / name, name, args.size, progress=progress)
+    if args.json:
+        print(json.dumps({"files": [str(f) for f in files]}))
+    else:
+        print("written: " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def cmd_diff(args) -> int:
+    from .diff import diff_bakes, exit_code, format_report, load_any, plot_report
+
+    a, b = load_any(args.a), load_any(args.b)
+    report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)
+    if args.plot:
+        plot_report(report, a.times, args.plot)
+    if args.json:
+        print(json.dumps(report.as_dict()))
+    else:
+        print(format_report(report, args.a, args.b))
+    return exit_code(report)
+
+
+def cmd_batch(args) -> int:
+    import os
+
+    from .batch import format_table, load_jobs, run_batch, summary
+
+    jobs = load_jobs(args.jobs_file)
+    workers = args.jobs or os.cpu_count() or 1
+    if workers < 1:
+        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    show = None if args.json else _batch_display(len(jobs))
+    start = time.perf_counter()
+    results = run_batch(jobs, args.out, workers, args.force, args.executor, args.scheduler,
+                        report=show)
+    data = summary(results, time.perf_counter() - start, workers)
+    write_text(Path(args.summary or Path(args.out) / "batch-summary.json"),
+               json.dumps(data, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(data))
+    else:
+        print(format_table(results))
+        print(f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed "
+              f"in {data['wall_seconds']:.1f} s with {workers} worker(s)")
+    return 1 if data["failed"] else 0
+
+
+def _batch_display(total: int):
+    """Progress of a batch on stderr: one line per finished job, and on a
+    terminal a live line with every running job's frame count."""
+    tty = sys.stderr.isatty()
+    running: dict[str, str] = {}
+    finished = [0]
+
+    def show(event: str, data) -> None:
+        if event == "start":
+            running[data] = "starting"
+        elif event == "progress":
+            name, done, frames = data
+            running[name] = f"{done}/{frames}"
+        elif event == "end":
+            running.pop(data.name, None)
+            finished[0] += 1
+            line = f"[{finished[0]}/{total}] {data.name}: {data.status}"
+            if data.message:
+                line += f" ({data.message})"
+            sys.stderr.write(("\r\033[K" if tty else "") + line + "\n")
+        if tty and running:
+            live = "  ".join(f"{k} {v}" for k, v in sorted(running.items()))
+            sys.stderr.write(f"\r\033[K[{finished[0]}/{total}] {live}"[:200])
+        sys.stderr.flush()
+
+    return show
+
+
+def cmd_sway(args) -> int:
+    from .sway import pull_release
+
+    r = pull_release(args.grammar, seed=args.seed, quality=args.quality)
+    data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
+            "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
+            "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),
+            "deflection_m": round(r.deflection, 4)}
+    if args.json:
+        print(json.dumps(data))
+    else:
+        print(f"{Path(args.grammar).stem}: H {r.height:.1f} m, DBH {r.dbh:.3f} m; pulled "
+              f"{r.force:.0f} N to {r.deflection:.3f} m and released: first sway "
+              f"{r.frequency:.3f} Hz (rig estimate {r.rayleigh_frequency:.3f} Hz), damping "
+              f"ratio {r.damping:.3f}")
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -211,7 +418,80 @@ def build_parser() -> argparse.ArgumentParser:
                                                "default 6.7)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
-    p.set_defaults(func=cmd_bake)
+    p.add_argument("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, "
+                                    "preview (default: the scene's `formats`, else only the "
+                                    ".npz bake)")
+    p.set_defaults(func=cmd_bake, radial=8, rings=1, no_leaves=False, position_tolerance=0.002,
+                   angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256)
+
+    p = sub.add_parser("export", help="export a bake to glTF, OBJ sequences, USD, previews",
+                       description="Write a bake (.npz) as animated glTF 2.0 (.glb or "
+                                   ".gltf+.bin), OBJ sequences, USD (needs usd-core) and "
+                                   "previews into OUT/<name>/, with manifest.json "
+                                   "(docs/formats.md).")
+    p.add_argument("bake", help="bake file (.npz) from `treebake bake`")
+    p.add_argument("--format", default="glb",
+                   help="comma-separated: glb, gltf, obj, usd, usda, preview (default: glb)")
+    p.add_argument("--out", default="out", help="output folder (default: out)")
+    p.add_argument("--name", help="job name: the output subfolder (default: the bake's scene)")
+    _add_export_options(p)
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("preview", help="contact sheet PNG and animated GIF of a bake",
+                       description="Draw a bake from the front and the side (orthographic, "
+                                   "no GPU): OUT/<name>/<name>.contact.png (12 frames) and "
+                                   "<name>.gif (the whole bake).")
+    p.add_argument("bake", help="bake file (.npz)")
+    p.add_argument("--out", default="out", help="output folder (default: out)")
+    p.add_argument("--name", help="job name: the output subfolder (default: the bake's scene)")
+    p.add_argument("--size", type=int, default=256, help="panel size, px (default 256)")
+    p.add_argument("--json", action="store_true", help="print the written files as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_preview)
+
+    p = sub.add_parser("diff", help="compare two bakes (or glTF exports): which motion changed",
+                       description="Compare two bakes (.npz) or two exported glTF files. "
+                                   "Exit 0: within tolerance; 1: the motion differs; 2: not "
+                                   "the same trees (or bad input).")
+    p.add_argument("a", help="first bake (.npz, .glb, .gltf)")
+    p.add_argument("b", help="second bake")
+    p.add_argument("--position-tolerance", type=float, default=1e-3,
+                   help="largest allowed position difference, m (default 0.001)")
+    p.add_argument("--angle-tolerance", type=float, default=0.1,
+                   help="largest allowed rotation difference, degrees (default 0.1)")
+    p.add_argument("--worst", type=int, default=5, help="how many worst segments to list")
+    p.add_argument("--json", action="store_true", help="the report as JSON")
+    p.add_argument("--plot", help="write a PNG of the worst segments' error over time")
+    p.set_defaults(func=cmd_diff)
+
+    p = sub.add_parser("batch", help="run many bakes from a job file, in parallel, resumably",
+                       description="Run the jobs of a job file (TOML, docs/batch.md) in worker "
+                                   "processes or on a Dask cluster. Finished jobs whose inputs "
+                                   "did not change are skipped. Exit 0 if every job succeeded.")
+    p.add_argument("jobs_file", help="job file (.toml)")
+    p.add_argument("--out", default="out", help="output folder (default: out)")
+    p.add_argument("--jobs", "-j", type=int, default=None,
+                   help="worker processes (default: the machine's cores)")
+    p.add_argument("--force", action="store_true", help="redo finished jobs too")
+    p.add_argument("--executor", choices=("process", "dask"), default="process",
+                   help="process: local worker processes (default); dask: a Dask cluster")
+    p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    p.add_argument("--summary", help="summary JSON path (default: OUT/batch-summary.json)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=cmd_batch)
+
+    p = sub.add_parser("sway", help="pull-and-release test: first sway frequency and damping",
+                       description="Pull a tree's main stem at 0.6 of its height until the top "
+                                   "moves 1 %% of the height, release it in still air, and "
+                                   "measure the first sway frequency and damping ratio (the "
+                                   "field method).")
+    p.add_argument("grammar", help="grammar file (.lsys)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
+    p.add_argument("--quality", choices=("draft", "default", "final"), default="default")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_sway)
 
     return parser
 

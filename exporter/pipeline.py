@@ -4,6 +4,7 @@ the CLI, batch runs and benchmarks call `bake_scene`."""
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -20,7 +21,7 @@ from .scene import QUALITIES, Quality, Scene
 from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
-from .sim.planar import PlanarSolver
+from .sim.planar import REFINE, PlanarSolver
 from .turtle import interpret
 
 
@@ -155,6 +156,10 @@ def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
         notes.append(f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone "
                      f"updates (first: tree {tree!r}, segment {seg}, t = {t:.3f} s, "
                      f"{acc:.0f} m/s^2): the motion there is milder than the load asks")
+    if stats.refined:
+        notes.append(f"{stats.refined} substeps were split in {REFINE} while a blast, a hit, a "
+                     "capped load or a fast spin acted (pivots drift with the square of the "
+                     "step)")
     if stats.broken:
         notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
     if stats.debris_clamped:
@@ -218,7 +223,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         log(note)
     trees = []
     for g, st_tree in zip(grown, sim_trees):
-        info = {"grammar": str(g.spec.grammar), "grammar_hash": g.grammar_hash, "seed": g.seed,
+        info = {"grammar": _relative(g.spec.grammar, scene.file), "grammar_hash": g.grammar_hash,
+                "seed": g.seed,
                 "first_frequency_hz": round(st_tree.rig.first_frequency, 5),
                 "bones": st_tree.rig.n_bones}
         motion = motions.get(g.model.name)
@@ -231,6 +237,15 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         trees.append(tree_bake_from_model(g.model, pos, rot, info))
     timing["wall_seconds"] = round(time.perf_counter() - started, 3)
     return Bake(np.arange(frames) / scene.fps, trees, meta, objects, timing)
+
+
+def _relative(path: Path, scene_file: str) -> str:
+    """A grammar's path as the scene file names it (relative to the scene's
+    folder), so a bake does not depend on where the checkout lives."""
+    try:
+        return Path(os.path.relpath(path, Path(scene_file).resolve().parent)).as_posix()
+    except ValueError:  # another drive
+        return Path(path).name
 
 
 def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None):

@@ -55,3 +55,98 @@ def model_preview(model, size: int = 512) -> Image.Image:
     starts = model.points[model.seg_start]
     ends = model.points[model.seg_end]
     return draw_views(starts, ends, model.width, model.leaf > 0, size, title=model.name)
+
+
+# ---------------------------------------------------------------------------
+# bakes: contact sheet and animated GIF
+
+
+def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Segment starts and ends (S, 3) m, widths (S,) m and leafy flags of
+    every tree at bake frame f; projectiles as short thick upright strokes."""
+    from .rotations import apply, matrices_from_quaternions
+
+    starts, ends, widths, leafy = [], [], [], []
+    for t in bake.trees:
+        k = bake.frame(t, f)
+        rest = (t.points[t.seg_end] - t.points[t.seg_start]).astype(np.float64)
+        r = matrices_from_quaternions(t.rotations[k].astype(np.float64))
+        p = t.positions[k].astype(np.float64)
+        starts.append(p)
+        ends.append(p + apply(r, rest))
+        widths.append(t.width.astype(np.float64))
+        leafy.append(t.leaf > 0)
+    if bake.objects is not None and len(bake.objects.sizes):
+        o = bake.objects
+        c = o.positions[f].astype(np.float64)
+        half = np.zeros_like(c)
+        half[:, 2] = 0.5 * o.sizes
+        starts.append(c - half)
+        ends.append(c + half)
+        widths.append(np.asarray(o.sizes, np.float64))
+        leafy.append(np.zeros(len(c), bool))
+    return (np.concatenate(starts), np.concatenate(ends), np.concatenate(widths),
+            np.concatenate(leafy))
+
+
+def bake_bounds(bake) -> tuple[np.ndarray, np.ndarray]:
+    """Framing for every frame: the rest bounds, grown to include the motion
+    but never more than one tree height beyond them (far debris is cut)."""
+    rest = np.concatenate([t.points for t in bake.trees])
+    lo, hi = rest.min(axis=0), rest.max(axis=0)
+    reach = max(t.height for t in bake.trees) if bake.trees else 1.0
+    moving = [t.positions.reshape(-1, 3) for t in bake.trees if not t.static]
+    if moving:
+        pts = np.concatenate(moving)
+        lo = np.maximum(np.minimum(lo, pts.min(axis=0)), lo - reach)
+        hi = np.minimum(np.maximum(hi, pts.max(axis=0)), hi + reach)
+    lo = lo.copy()
+    lo[2] = min(lo[2], 0.0)
+    return lo, hi
+
+
+def frame_view(bake, f: int, size: int, bounds) -> Image.Image:
+    s, e, w, leafy = posed_segments(bake, f)
+    title = f"{bake.meta.get('scene', '')}  frame {f + 1}  t = {float(bake.times[f]):.2f} s"
+    return draw_views(s, e, w, leafy, size, bounds=bounds, title=title)
+
+
+def contact_sheet(bake, columns: int = 4, rows: int = 3, size: int = 256,
+                  progress=None) -> Image.Image:
+    """columns x rows frames, evenly spaced from first to last, each front
+    and side, on one image with the same framing."""
+    n = len(bake.times)
+    cells = min(columns * rows, n)
+    frames = np.unique(np.round(np.linspace(0, n - 1, cells)).astype(int))
+    bounds = bake_bounds(bake)
+    first = frame_view(bake, int(frames[0]), size, bounds)
+    cw, ch = first.size
+    cols = min(columns, len(frames))
+    sheet = Image.new("RGB", (cols * cw, int(np.ceil(len(frames) / cols)) * ch), BACKGROUND)
+    for k, f in enumerate(frames):
+        img = first if k == 0 else frame_view(bake, int(f), size, bounds)
+        sheet.paste(img, ((k % cols) * cw, (k // cols) * ch))
+        if progress is not None:
+            progress(k + 1, len(frames))
+    return sheet
+
+
+def animated_gif(bake, size: int = 256, max_frames: int = 120, progress=None) -> bytes:
+    """The bake as a looping GIF (front and side), every stride-th frame so
+    at most `max_frames` are drawn; played at the bake's speed."""
+    import io
+
+    n = len(bake.times)
+    stride = max(1, int(np.ceil(n / max_frames)))
+    frames = list(range(0, n, stride))
+    bounds = bake_bounds(bake)
+    images = []
+    for k, f in enumerate(frames):
+        images.append(frame_view(bake, f, size, bounds).quantize(colors=64, method=2, dither=0))
+        if progress is not None:
+            progress(k + 1, len(frames))
+    buf = io.BytesIO()
+    delay = max(20, round(1000.0 * stride / bake.fps / 10.0) * 10)  # GIF ticks are 10 ms
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=delay,
+                   loop=0, optimize=False)
+    return buf.getvalue()

@@ -175,7 +175,7 @@ class Scene:
     cuts: list[CutSpec] = field(default_factory=list)
     pulls: list[PullSpec] = field(default_factory=list)
     camera: CameraSpec | None = None
-    formats: tuple[str, ...] = ("glb",)
+    formats: tuple[str, ...] = ()  # exported by `treebake bake` unless --format says otherwise
 
     @property
     def frame_count(self) -> int:
@@ -303,8 +303,8 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         ground=r.boolean(raw, "ground", "", True),
     )
     scene.quality = _quality(r, raw.get("quality", "default"))
-    formats = raw.get("formats", ["glb"])
-    allowed_formats = ("glb", "gltf", "obj", "usd", "npz")
+    formats = raw.get("formats", [])
+    allowed_formats = ("glb", "gltf", "obj", "usd", "usda", "preview", "npz")
     if not isinstance(formats, list) or not all(f in allowed_formats for f in formats):
         raise r.fail("formats", f"must be a list of: {', '.join(allowed_formats)}; got {formats!r}")
     scene.formats = tuple(formats)

@@ -7,6 +7,6 @@ GRAMMARS = ROOT / "grammars"
 PRESETS = ROOT / "presets"
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT

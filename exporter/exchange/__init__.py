@@ -1,0 +1,3 @@
+"""Output formats, one module per job: `mesh` (tree geometry and skinning),
+`anim` (joint channels, keyframe reduction), `axes` (Z up -> Y up), `gltf`,
+`obj`, `usd` (optional usd-core). `exporter.export` drives them."""

@@ -36,6 +36,7 @@ class SceneLoads:
     def __init__(self, scene: Scene, extent: np.ndarray | None = None):
         self.scene = scene
         self.g = np.array([0.0, 0.0, -scene.gravity])
+        self.blast_active = False  # did the last `forces` call feel a blast
         rng = np.random.default_rng(scene.seed)
         self.wind = None
         if scene.wind is not None and scene.wind.speed > 0:
@@ -77,6 +78,7 @@ class SceneLoads:
         overstate its impulse."""
         air = self.air_velocity(com, t)
         force = _drag_per_bone(air, vel, axis, props)
+        self.blast_active = False
         if include_gravity:
             force += props.mass[:, None] * self.g
         for e in self.explosions:
@@ -84,8 +86,11 @@ class SceneLoads:
                 continue
             samples = BLAST_SAMPLES if dt > 0 else 1
             for ts in t + dt * (np.arange(samples) + 0.5) / samples if dt > 0 else [t]:
-                force += e.force(com, ts, axis, props.wood_area, props.leaf_area,
-                                 props.diameter, 1.2) / samples
+                blast = e.force(com, ts, axis, props.wood_area, props.leaf_area,
+                                props.diameter, 1.2)
+                if blast.any():
+                    self.blast_active = True
+                    force += blast / samples
         for a in self.attractors:
             force += props.mass[:, None] * a.acceleration(com, t)
         return force

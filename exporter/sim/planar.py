@@ -70,6 +70,8 @@ from .stability import chain_gaps, inertia_floor
 
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
+REFINE = 8  # pymunk steps per substep while an impulsive load acts
+REFINE_SPIN = 0.015  # rad: ... or while a body turns this much in a substep
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
 SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
 
@@ -89,6 +91,7 @@ class Stats:
     max_joint_gap: float = 0.0  # largest pivot separation / bone length at a frame
     limited: int = 0  # bone updates whose load was capped at MAX_ACCELERATION
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
+    refined: int = 0  # substeps split into REFINE steps (blasts, hits, caps, fast spins)
     broken: int = 0
     debris: int = 0
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
@@ -242,8 +245,9 @@ class PlanarSolver:
         a, d, w = self.pair_anc, self.pair_dsc, self.pair_weight
 
         def add(own: np.ndarray, each: np.ndarray, weight: np.ndarray) -> np.ndarray:
-            flat = each.reshape(len(each), -1) * weight[:, None]
-            out = own.reshape(n, -1).copy()
+            width = int(np.prod(own.shape[1:]))
+            flat = each.reshape(len(each), width) * weight[:, None]
+            out = own.reshape(n, width).copy()
             for k in range(out.shape[1]):
                 out[:, k] += np.bincount(a, flat[:, k], minlength=n)
             return out.reshape(own.shape)
@@ -540,9 +544,18 @@ class PlanarSolver:
         pulls = self.pull_forces(t)
         if pulls is not None:
             force += pulls
+        limited = self.stats.limited
         force = self._cap(force, t)
+        hits = self.projectiles.hits if self.projectiles is not None else 0
         if self.projectiles is not None:  # impulses on hit bones, both ways
             self.projectiles.advance(t, dt, pose, self)
+        # an impulsive load (a blast front, a hit, a capped load) spins parts
+        # fast, and pivots drift by (omega h)^2 per step: step finer meanwhile,
+        # and while anything still spins fast
+        spin = float(np.abs(self.state[self.in_space, 5]).max(initial=0.0))
+        self.refine = REFINE if (self.loads.blast_active or self.stats.limited > limited or (
+            self.projectiles is not None and self.projectiles.hits > hits)
+            or spin * self.h > REFINE_SPIN) else 1
         if self.debris.count:
             self.debris.step(dt, lambda c, v, ax: self._debris_loads(t, c, v, ax, dt))
             force[self.debris.bones] = 0.0
@@ -956,6 +969,7 @@ class PlanarSolver:
         substep, t, fresh = 0, 0.0, True
         next_update, last_update = 0, 0
         self.contact_active = False
+        self.refine = 1
         for f in range(1, frames):
             for _ in range(self.spf):
                 if substep >= next_update:
@@ -984,7 +998,13 @@ class PlanarSolver:
                     self.stats.update_seconds += time.perf_counter() - t0
                 t0 = time.perf_counter()
                 batch.set_space_bodies(self.space, writes, self.write_buf)
-                self.space.step(self.h)
+                if self.refine > 1:
+                    for _ in range(self.refine):  # forces persist? set them every step
+                        self.space.step(self.h / self.refine)
+                        batch.set_space_bodies(self.space, writes, self.write_buf)
+                    self.stats.refined += 1
+                else:
+                    self.space.step(self.h)
                 self.stats.step_seconds += time.perf_counter() - t0
                 substep += 1
                 t = substep * self.h

@@ -1,0 +1,223 @@
+"""Compare two bakes (or two exported glTF files): which motion changed.
+
+Topology first: the same trees with the same segments and parents, the same
+frames; otherwise the difference is described and nothing is compared.
+Then, per tree, segment and frame: the position error of both ends of the
+segment (m, and % of the tree's height) and the rotation error (degrees).
+The report gives the maximum and RMS, the first frame past the tolerance,
+the worst segments by limb path, and whether the difference is only
+float32 round-off ("noise").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .bake import Bake, TreeBake, load_bake
+from .errors import InputError
+from .rotations import angle_between
+from .sway import segment_ends
+
+NOISE_RELATIVE = 4e-7  # float32 round-off on a coordinate, relative to its size
+NOISE_ANGLE = 1e-4  # degrees
+
+
+class TopologyError(InputError):
+    """The two bakes do not describe the same trees, segments or frames."""
+
+
+@dataclass
+class SegmentError:
+    tree: str
+    segment: int
+    path: str
+    max_position: float  # m
+    max_angle: float  # degrees
+    frame: int  # where the larger of the two was largest
+
+
+@dataclass
+class DiffReport:
+    frames: int
+    segments: int
+    max_position: float  # m
+    max_position_percent: float  # % of the tree's height
+    rms_position: float  # m
+    max_angle: float  # degrees
+    rms_angle: float  # degrees
+    first_frame: int | None  # first frame past a tolerance, None if none
+    first_time: float | None  # s
+    worst: list[SegmentError]
+    noise: bool  # everything within float32 round-off
+    within: bool  # within the tolerances
+    position_tolerance: float
+    angle_tolerance: float
+    curves: dict = field(default_factory=dict)  # worst segments' error per frame, for plots
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in self.__dict__.items() if k != "curves"}
+        out["worst"] = [w.__dict__ for w in self.worst]
+        return out
+
+
+def load_any(path: str | Path) -> Bake:
+    """A bake (.npz) or an exported glTF (.glb/.gltf) read back as a bake."""
+    p = Path(path)
+    if p.suffix.lower() in (".glb", ".gltf"):
+        from .exchange.gltf_read import read_gltf_bake
+
+        return read_gltf_bake(p)
+    return load_bake(p)
+
+
+def check_topology(a: Bake, b: Bake) -> None:
+    """Raise TopologyError saying what differs, if anything structural does."""
+    problems = []
+    if len(a.times) != len(b.times):
+        problems.append(f"frame counts differ: {len(a.times)} vs {len(b.times)}")
+    elif not np.allclose(a.times, b.times, atol=1e-6):
+        problems.append("frame times differ (another fps?)")
+    names_a, names_b = [t.name for t in a.trees], [t.name for t in b.trees]
+    if names_a != names_b:
+        only_a = sorted(set(names_a) - set(names_b))
+        only_b = sorted(set(names_b) - set(names_a))
+        what = [f"only in A: {', '.join(only_a)}"] if only_a else []
+        what += [f"only in B: {', '.join(only_b)}"] if only_b else []
+        problems.append("trees differ (" + ("; ".join(what) or "same names, other order") + ")")
+    else:
+        for ta, tb in zip(a.trees, b.trees):
+            if ta.n_segments != tb.n_segments:
+                problems.append(f"tree {ta.name!r}: {ta.n_segments} vs {tb.n_segments} segments")
+            elif not np.array_equal(ta.seg_parent, tb.seg_parent):
+                s = int(np.nonzero(ta.seg_parent != tb.seg_parent)[0][0])
+                problems.append(f"tree {ta.name!r}: segment {s} ({ta.paths[s]}) hangs on "
+                                f"{ta.seg_parent[s]} in A, {tb.seg_parent[s]} in B")
+    if problems:
+        raise TopologyError("not the same trees: " + "; ".join(problems))
+
+
+def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Position error (F, S) m (worse of the two segment ends) and rotation
+    error (F, S) degrees; static trees are held at their one frame."""
+    segs = np.arange(ta.n_segments)
+
+    def ends(t: TreeBake) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        base = t.positions.astype(float)
+        tip = segment_ends(t, segs)
+        rot = t.rotations.astype(float)
+        if t.positions.shape[0] == 1 and frames > 1:
+            base, tip, rot = (np.repeat(x, frames, axis=0) for x in (base, tip, rot))
+        return base, tip, rot
+
+    base_a, tip_a, rot_a = ends(ta)
+    base_b, tip_b, rot_b = ends(tb)
+    pos = np.maximum(np.linalg.norm(base_a - base_b, axis=-1),
+                     np.linalg.norm(tip_a - tip_b, axis=-1))
+    ang = np.degrees(angle_between(rot_a, rot_b))
+    return pos, ang
+
+
+def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
+               angle_tolerance: float = 0.1, worst: int = 5) -> DiffReport:
+    """Compare two bakes of the same trees. Tolerances: metres and degrees."""
+    check_topology(a, b)
+    frames = len(a.times)
+    pos_all, ang_all, pct_all, rows = [], [], [], []
+    scale = 1.0
+    for ta, tb in zip(a.trees, b.trees):
+        pos, ang = _tree_errors(ta, tb, frames)
+        height = max(ta.height, 1e-9)
+        scale = max(scale, float(np.abs(ta.points).max()))
+        pos_all.append(pos)
+        ang_all.append(ang)
+        pct_all.append(100.0 * pos.max() / height)
+        for s in range(ta.n_segments):
+            rows.append((ta.name, s, ta.paths[s], pos[:, s], ang[:, s]))
+    pos = np.concatenate(pos_all, axis=1)
+    ang = np.concatenate(ang_all, axis=1)
+    over = (pos > position_tolerance) | (ang > angle_tolerance)
+    bad_frames = np.nonzero(over.any(axis=1))[0]
+    first = int(bad_frames[0]) if len(bad_frames) else None
+    score = np.maximum(pos.max(axis=0) / position_tolerance, ang.max(axis=0) / angle_tolerance)
+    order = np.argsort(-score, kind="stable")[:worst]
+    worst_rows, curves = [], {}
+    for i in order:
+        name, s, path, p, g = rows[i]
+        if p.max() == 0 and g.max() == 0:
+            continue
+        f = int(np.argmax(np.maximum(p / position_tolerance, g / angle_tolerance)))
+        worst_rows.append(SegmentError(name, s, path, float(p.max()), float(g.max()), f))
+        curves[f"{name} {path}"] = (p, g)
+    noise = bool(pos.max() <= NOISE_RELATIVE * scale + 1e-9 and ang.max() <= NOISE_ANGLE)
+    return DiffReport(
+        frames=frames, segments=pos.shape[1], max_position=float(pos.max()),
+        max_position_percent=float(max(pct_all)) if pct_all else 0.0,
+        rms_position=float(np.sqrt(np.mean(pos**2))), max_angle=float(ang.max()),
+        rms_angle=float(np.sqrt(np.mean(ang**2))), first_frame=first,
+        first_time=float(a.times[first]) if first is not None else None, worst=worst_rows,
+        noise=noise, within=first is None, position_tolerance=position_tolerance,
+        angle_tolerance=angle_tolerance, curves=curves)
+
+
+def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
+    """The report as text."""
+    if r.max_position == 0 and r.max_angle == 0:
+        verdict = "identical"
+    elif r.noise:
+        verdict = "noise-level (float32 round-off)"
+    elif r.within:
+        verdict = "within tolerance"
+    else:
+        verdict = "DIFFERENT"
+    lines = [f"{name_a} vs {name_b}: {verdict}",
+             (f"  {r.segments} segments x {r.frames} frames; tolerance "
+              f"{r.position_tolerance:g} m, {r.angle_tolerance:g} deg"),
+             (f"  position: max {r.max_position:.3g} m ({r.max_position_percent:.3g} % of "
+              f"height), rms {r.rms_position:.3g} m"),
+             f"  rotation: max {r.max_angle:.3g} deg, rms {r.rms_angle:.3g} deg"]
+    if r.first_frame is not None:
+        lines.append(f"  first frame past tolerance: {r.first_frame} (t = {r.first_time:.3f} s)")
+    if r.worst and (r.max_position > 0 or r.max_angle > 0):
+        lines.append("  worst segments:")
+        for w in r.worst:
+            lines.append(f"    {w.tree} {w.path} (segment {w.segment}): {w.max_position:.3g} m, "
+                         f"{w.max_angle:.3g} deg, worst at frame {w.frame}")
+    return "\n".join(lines)
+
+
+def plot_report(r: DiffReport, times: np.ndarray, path: str | Path) -> Path:
+    """PNG of the worst segments' position and rotation error over time."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise InputError("--plot needs matplotlib: pip install 'treebake[plots]'") from None
+    from .fileio import atomic_path
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    for label, (p, g) in r.curves.items():
+        top.plot(times, p, label=label)
+        bottom.plot(times, g, label=label)
+    top.axhline(r.position_tolerance, color="0.5", ls="--", lw=0.8)
+    bottom.axhline(r.angle_tolerance, color="0.5", ls="--", lw=0.8)
+    top.set_ylabel("position error, m")
+    bottom.set_ylabel("rotation error, deg")
+    bottom.set_xlabel("time, s")
+    top.set_title("worst segments")
+    if r.curves:
+        top.legend(fontsize=7)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, metadata={"Software": None})
+    plt.close(fig)
+    return Path(path)
+
+
+def exit_code(r: DiffReport) -> int:
+    return 0 if r.within else 1
+

@@ -1,0 +1,417 @@
+"""Joint animation channels from a bake: local transforms, quaternion
+hemisphere continuity, constant-channel removal and keyframe reduction with
+a world-space error guarantee.
+
+Joints are segments. Joint s sits at its segment's base with the world
+axes as its rest orientation, so its world transform at frame f is
+T(positions[f, s]) R(rotations[f, s]) and its local transform is taken
+relative to its parent segment (roots: relative to the tree's root node,
+the identity). Quaternions are x y z w throughout.
+
+Reduction (Douglas-Peucker on every channel at once, vectorised): a
+channel keeps its first and last frames; any span whose linear
+interpolation misses a dropped frame by more than the channel's tolerance
+gets its worst frame as a new key, until none does. Rotation error is the
+larger of slerp's (the glTF rule) and normalised component-wise
+interpolation's (what Blender does). Local tolerances start from the world
+tolerances (rotation: also limited by position_tolerance / reach, the
+longest lever the joint swings), then the whole tree is rebuilt by forward
+kinematics, the way a viewer does, and compared with the bake; if any joint
+misses position_tolerance (at its base or its segment's tip) or
+angle_tolerance, the tree's local tolerances are halved and it is reduced
+again (after 8 halvings: no reduction for that tree).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..rotations import cross
+
+# a channel that stays this close to its frame-0 value is not written even
+# without reduction: float32 noise of the bake (2 ulp of the joint's distance
+# from the origin, at least 1e-7 m) and of unit quaternions
+CONSTANT_ULPS = 2 * 2.0**-23
+CONSTANT_ANGLE = 1e-6  # rad
+MAX_HALVINGS = 8
+START_SCALE = 0.125  # local tolerance / world tolerance on the first try
+
+
+@dataclass(frozen=True)
+class ReduceOptions:
+    """World-space tolerances: position_tolerance in m (joint bases and
+    segment tips), angle_tolerance in rad (joint rotations). enabled=False
+    keeps every frame of every channel that changes."""
+
+    position_tolerance: float = 2e-3
+    angle_tolerance: float = math.radians(0.25)
+    enabled: bool = True
+
+
+@dataclass
+class Channel:
+    joint: int
+    path: str  # "translation" or "rotation"
+    frames: np.ndarray  # (K,) kept frame indices, increasing
+    values: np.ndarray  # (K, 3) or (K, 4) float32
+
+
+@dataclass
+class Animation:
+    """Local rest transforms (frame 0) and the channels that change."""
+
+    translation: np.ndarray  # (J, 3) float32, frame 0
+    rotation: np.ndarray  # (J, 4) float32, frame 0
+    channels: list[Channel] = field(default_factory=list)
+    report: dict = field(default_factory=dict)
+    group_errors: tuple = ()  # per tree: worst position error (m), angle error (rad)
+
+
+# ---------------------------------------------------------------------------
+# quaternion helpers (x y z w, float64)
+
+
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def qconj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (..., 3) by unit quaternions q (..., 4)."""
+    u = q[..., :3]
+    w = q[..., 3:4]
+    t = 2.0 * cross(u, v)
+    return v + w * t + cross(u, t)
+
+
+def qangle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) between unit quaternions, accurate near zero."""
+    s = np.where((a * b).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    d = np.linalg.norm(a - s * b, axis=-1)
+    return 4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))
+
+
+def qnormalize(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along `axis` (time) so consecutive quaternions have a
+    non-negative dot product."""
+    q = np.moveaxis(q, axis, 0)
+    dots = (q[1:] * q[:-1]).sum(-1)
+    sign = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
+    out = q.copy()
+    out[1:] *= sign[..., None]
+    return np.moveaxis(out, 0, axis)
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Shortest-path slerp of unit quaternions (..., 4), t (...)."""
+    d = (a * b).sum(-1)
+    b = np.where(d[..., None] < 0, -b, b)
+    d = np.abs(d)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    small = theta < 1e-6
+    st = np.where(small, 1.0, np.sin(theta))
+    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / st)
+    wb = np.where(small, t, np.sin(t * theta) / st)
+    return qnormalize(wa[..., None] * a + wb[..., None] * b)
+
+
+def nlerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    d = (a * b).sum(-1)
+    b = np.where(d[..., None] < 0, -b, b)
+    return qnormalize(a + (b - a) * t[..., None])
+
+
+# ---------------------------------------------------------------------------
+# local transforms
+
+
+def local_transforms(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray):
+    """World (F, J, 3) positions and (F, J, 4) rotations -> local translation
+    and rotation relative to each joint's parent (parent -1: identity)."""
+    pos = pos.astype(np.float64)
+    rot = qnormalize(rot.astype(np.float64))
+    has = parent >= 0
+    par = np.where(has, parent, 0)
+    q_par = np.where(has[None, :, None], rot[:, par], np.array([0.0, 0.0, 0.0, 1.0]))
+    p_par = np.where(has[None, :, None], pos[:, par], 0.0)
+    inv = qconj(q_par)
+    return qrotate(inv, pos - p_par), qmul(inv, rot)
+
+
+def depth_order(parent: np.ndarray) -> list[np.ndarray]:
+    """Joints grouped by depth (roots first), for level-by-level kinematics."""
+    if len(parent) and (parent >= np.arange(len(parent))).any():
+        raise ValueError("segment parents must come before their children")
+    depth = np.zeros(len(parent), dtype=np.int64)
+    up = parent.copy()
+    while (up >= 0).any():
+        live = up >= 0
+        depth += live
+        up = np.where(live, parent[np.maximum(up, 0)], -1)
+    return [np.nonzero(depth == d)[0] for d in range(int(depth.max(initial=-1)) + 1)]
+
+
+def forward(parent: np.ndarray, levels: list[np.ndarray], t_loc: np.ndarray,
+            q_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World transforms from local ones, (F, J, 3) and (F, J, 4)."""
+    pos = np.empty_like(t_loc)
+    rot = np.empty_like(q_loc)
+    for lv in levels:
+        p = parent[lv]
+        root = p < 0
+        if root.all():
+            pos[:, lv], rot[:, lv] = t_loc[:, lv], q_loc[:, lv]
+            continue
+        pp = np.where(root, 0, p)
+        qp = np.where(root[None, :, None], np.array([0.0, 0.0, 0.0, 1.0]), rot[:, pp])
+        tp = np.where(root[None, :, None], 0.0, pos[:, pp])
+        rot[:, lv] = qmul(qp, q_loc[:, lv])
+        pos[:, lv] = tp + qrotate(qp, t_loc[:, lv])
+    return pos, rot
+
+
+# ---------------------------------------------------------------------------
+# reduction
+
+
+def _spans(keep: np.ndarray):
+    """For every frame: the kept keys around it and the fraction between."""
+    F = keep.shape[1]
+    idx = np.arange(F)
+    prev = np.maximum.accumulate(np.where(keep, idx, -1), axis=1)
+    nxt = np.minimum.accumulate(np.where(keep, idx, F)[:, ::-1], axis=1)[:, ::-1]
+    nxt = np.where(nxt >= F, prev, nxt)  # after the last key: hold it
+    span = nxt - prev
+    t = np.where(span > 0, (idx - prev) / np.where(span > 0, span, 1), 0.0)
+    return prev, nxt, t
+
+
+def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
+    """Every frame (C, F, D) rebuilt from the kept keys as glTF's LINEAR
+    interpolation does it (slerp for rotations)."""
+    prev, nxt, t = _spans(keep)
+    va = np.take_along_axis(values, prev[..., None], axis=1)
+    vb = np.take_along_axis(values, nxt[..., None], axis=1)
+    if not rotation:
+        return va + (vb - va) * t[..., None]
+    return slerp(va, vb, t)
+
+
+def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
+    """(C, F) interpolation error at every frame. Rotations: an upper bound
+    of both slerp's and component-wise (nlerp) interpolation's angle error:
+    nlerp's error plus the angle between nlerp and slerp."""
+    prev, nxt, t = _spans(keep)
+    va = np.take_along_axis(values, prev[..., None], axis=1)
+    vb = np.take_along_axis(values, nxt[..., None], axis=1)
+    if not rotation:
+        return np.linalg.norm(va + (vb - va) * t[..., None] - values, axis=-1)
+    d = (va * vb).sum(-1)
+    vb = np.where(d[..., None] < 0, -vb, vb)
+    half = np.arccos(np.clip(np.abs(d), 0.0, 1.0))  # half the rotation between the keys
+    gap = 2.0 * np.abs(t * half - np.arctan2(t * np.sin(half), 1.0 - t + t * np.cos(half)))
+    return qangle(qnormalize(va + (vb - va) * t[..., None]), values) + gap
+
+
+def _midpoint_errors(values: np.ndarray, rotation: bool) -> np.ndarray:
+    """(C, F-2) error of predicting each inner frame from its two neighbours."""
+    a, b, v = values[:, :-2], values[:, 2:], values[:, 1:-1]
+    if not rotation:
+        return np.linalg.norm(0.5 * (a + b) - v, axis=-1)
+    half = np.full(a.shape[:2], 0.5)
+    return qangle(slerp(a, b, half), v)  # at t = 1/2 slerp and nlerp agree
+
+
+def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
+    """(C, F) bool: the frames to keep so that interpolation reproduces every
+    frame of every channel within tol (C,)."""
+    C, F = values.shape[:2]
+    values = values.astype(np.float32)  # twice as fast; far finer than any tolerance
+    tol = tol.astype(np.float32)
+    keep = np.zeros((C, F), dtype=bool)
+    keep[:, 0] = keep[:, -1] = True
+    # a frame its two neighbours cannot predict is kept from the start: on
+    # noisy channels this settles most keys in one pass instead of many rounds
+    if F > 2:
+        keep[:, 1:-1] = _midpoint_errors(values, rotation) > tol[:, None]
+    active = np.arange(C)
+    while len(active):
+        k = keep[active]
+        err = _errors(values[active], k, rotation)
+        err[k] = 0.0
+        rows = (err > tol[active, None]).any(axis=1)
+        if not rows.any():
+            break
+        active, k, err = active[rows], k[rows], err[rows]
+        # Douglas-Peucker: the worst frame of every span that misses becomes a key
+        flat_keep = k.ravel()
+        flat = err.ravel()
+        span_max = np.maximum.reduceat(flat, np.flatnonzero(flat_keep))
+        span_id = np.cumsum(flat_keep) - 1
+        add = (flat == span_max[span_id]) & (flat > np.repeat(tol[active], F))
+        keep[active] = k | add.reshape(k.shape)
+    return keep
+
+
+def _constant(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
+    ref = values[:, :1]
+    dev = qangle(values, ref) if rotation else np.linalg.norm(values - ref, axis=-1)
+    return (dev <= tol[:, None]).all(axis=1)
+
+
+def subtree_reach(parent: np.ndarray, base: np.ndarray, tips: np.ndarray) -> np.ndarray:
+    """(J,) the largest distance (m) from each joint's base to a tip point of
+    any joint in its subtree: the lever its rotation error acts on."""
+    reach = np.linalg.norm(tips - base, axis=1)
+    anc = parent.copy()
+    who = np.arange(len(parent))
+    while (anc >= 0).any():
+        live = anc >= 0
+        a, w = anc[live], who[live]
+        np.maximum.at(reach, a, np.linalg.norm(tips[w] - base[a], axis=1))
+        anc = np.where(live, parent[np.maximum(anc, 0)], -1)
+    return reach
+
+
+def _constant_masks(t_loc, q_loc, tol_t, tol_q):
+    tv = np.swapaxes(t_loc, 0, 1)
+    qv = np.swapaxes(q_loc, 0, 1)
+    return _constant(tv, tol_t, False), _constant(qv, tol_q, True)
+
+
+def _subtree(parent: np.ndarray, rows: np.ndarray):
+    """The joints `rows` (whole trees, sorted) with parents renumbered."""
+    new = np.full(len(parent), -1, dtype=np.int64)
+    new[rows] = np.arange(len(rows))
+    p = parent[rows]
+    return np.where(p >= 0, new[np.maximum(p, 0)], -1)
+
+
+def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec):
+    """Worst world errors per joint over all frames: position (m, joint base
+    and segment tip) and angle (rad), as a viewer rebuilds them from the
+    kept keys (lerp, slerp, then the joint hierarchy)."""
+    t_r = np.swapaxes(_interpolate(np.swapaxes(t_loc, 0, 1), keep_t, False), 0, 1)
+    q_r = np.swapaxes(_interpolate(np.swapaxes(q_loc, 0, 1), keep_q, True), 0, 1)
+    wp, wq = forward(parent, depth_order(parent), t_r, q_r)
+    e_base = np.linalg.norm(wp - pos, axis=-1).max(axis=0)
+    e_tip = np.linalg.norm(wp + qrotate(wq, seg_vec[None]) - pos - qrotate(rot, seg_vec[None]),
+                           axis=-1).max(axis=0)
+    return np.maximum(e_base, e_tip), qangle(wq, rot).max(axis=0)
+
+
+def _chunks(rows: np.ndarray, group: np.ndarray, size: int = 1500) -> list[np.ndarray]:
+    """`rows` in pieces of whole trees, about `size` joints each (bounded memory)."""
+    g = group[rows]
+    cuts = np.flatnonzero(g[1:] != g[:-1]) + 1
+    out, start = [], 0
+    for c in [*cuts.tolist(), len(rows)]:
+        if c - start >= size or c == len(rows):
+            out.append(rows[start:c])
+            start = c
+    return [c for c in out if len(c)]
+
+
+def _quantised(t_loc, q_loc):
+    """What the file stores: float32 values, quaternions renormalised."""
+    t = t_loc.astype(np.float32).astype(np.float64)
+    q = qnormalize(q_loc).astype(np.float32).astype(np.float64)
+    return t, q
+
+
+def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.ndarray,
+            reach: np.ndarray, opts: ReduceOptions, group: np.ndarray | None = None) -> Animation:
+    """Channels for joints with world motion pos (F, J, 3), rot (F, J, 4)
+    (in the output's axes; a joint's rest orientation is the world axes);
+    seg_vec (J, 3) rest base-to-tip vectors, m; reach (J,) m (subtree_reach);
+    group (J,) tree index of each joint: tolerances are tightened per tree."""
+    F, J = pos.shape[:2]
+    group = np.zeros(J, np.int64) if group is None else np.asarray(group, np.int64)
+    G = int(group.max(initial=-1)) + 1
+    pos = pos.astype(np.float64)
+    rot = continuous(qnormalize(rot.astype(np.float64)), axis=0)
+    t_loc, q_loc = local_transforms(parent, pos, rot)
+    q_loc = continuous(q_loc, axis=0)
+    t_loc, q_loc = _quantised(t_loc, q_loc)
+    const_position = np.maximum(1e-7, CONSTANT_ULPS * np.abs(pos).max(axis=(0, 2)))
+    tv = np.swapaxes(t_loc, 0, 1)
+    qv = np.swapaxes(q_loc, 0, 1)
+    reduce = np.full(G, opts.enabled and F > 2)
+    scale = np.full(G, START_SCALE)
+    keep_t = np.zeros((J, F), bool)
+    keep_q = np.zeros((J, F), bool)
+    const_t = np.zeros(J, bool)
+    const_q = np.zeros(J, bool)
+    e_pos = np.zeros(J)
+    e_ang = np.zeros(J)
+    lever = opts.position_tolerance / np.maximum(reach, 1e-6)
+    rows = np.arange(J)
+    for attempt in range(MAX_HALVINGS + 2):
+        red = reduce[group[rows]]
+        sc = scale[group[rows]]
+        tol_t = np.where(red, sc * opts.position_tolerance, 0.0)
+        tol_q = np.where(red, sc * np.minimum(opts.angle_tolerance, lever[rows]), 0.0)
+        const_t[rows] = _constant(tv[rows], np.maximum(tol_t, const_position[rows]), False)
+        const_q[rows] = _constant(qv[rows], np.maximum(tol_q, CONSTANT_ANGLE), True)
+        for keep, vals, const, tol, is_rot in ((keep_t, tv, const_t, tol_t, False),
+                                               (keep_q, qv, const_q, tol_q, True)):
+            k = np.zeros((len(rows), F), bool)
+            c = const[rows]
+            k[c, 0] = True
+            k[~c & ~red] = True
+            sel = ~c & red
+            if sel.any():
+                k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot)
+                # a reduced channel needs its own key times (4 bytes a key); when
+                # that costs more than it saves, keep every frame (shared times)
+                width = vals.shape[2] * 4
+                dense = sel & (k.sum(axis=1) * (width + 4) >= F * width)
+                k[dense] = True
+            keep[rows] = k
+        for chunk in _chunks(rows, group):
+            e_pos[chunk], e_ang[chunk] = _world_error(
+                _subtree(parent, chunk), t_loc[:, chunk], q_loc[:, chunk], keep_t[chunk],
+                keep_q[chunk], pos[:, chunk], rot[:, chunk], seg_vec[chunk])
+        g_pos = np.zeros(G)
+        g_ang = np.zeros(G)
+        np.maximum.at(g_pos, group, e_pos)
+        np.maximum.at(g_ang, group, e_ang)
+        failing = reduce & ((g_pos > opts.position_tolerance) | (g_ang > opts.angle_tolerance))
+        if not failing.any():
+            break
+        scale[failing] *= 0.5
+        if attempt >= MAX_HALVINGS:
+            reduce[failing] = False  # give up reducing these trees: keep every frame
+        rows = np.flatnonzero(failing[group])
+    channels = []
+    for j in range(J):
+        if not const_t[j]:
+            fr = np.flatnonzero(keep_t[j])
+            channels.append(Channel(j, "translation", fr, t_loc[fr, j].astype(np.float32)))
+        if not const_q[j]:
+            fr = np.flatnonzero(keep_q[j])
+            q = continuous(q_loc[fr, j], axis=0)  # kept keys, not just frames, stay continuous
+            channels.append(Channel(j, "rotation", fr, q.astype(np.float32)))
+    written = sum(len(c.frames) for c in channels)
+    report = {"frames": F, "nodes": J, "channels": 2 * J, "channels_written": len(channels),
+              "keys_full": 2 * J * F, "keys_written": written,
+              "trees_reduced": int(reduce.sum()), "trees_unreduced": int(G - reduce.sum()),
+              "max_position_error_m": float(g_pos.max(initial=0.0)),
+              "max_angle_error_rad": float(g_ang.max(initial=0.0))}
+    return Animation(t_loc[0].astype(np.float32), q_loc[0].astype(np.float32), channels, report,
+                     (g_pos, g_ang))

@@ -1,0 +1,368 @@
+"""glTF 2.0 writer (.glb, or .gltf + .bin): trees as skinned meshes whose
+joints are the segments, LINEAR animation channels, projectiles as animated
+rigid nodes. Units metres, Y up ((x, y, z) -> (x, z, -y), see axes.py).
+
+Layout per animated tree: a root node named after the tree (identity
+transform, the skin's `skeleton`) whose descendants are the joint nodes
+(one per segment, named by its path, parented like the segments); a
+separate root node holds the mesh and the skin (glTF ignores a skinned mesh
+node's own transform, so it has none). A joint's node transform is its
+frame-0 local transform; channels exist only where it changes. Static
+trees are plain meshes with no joints and no animation.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..bake import Bake
+from ..fileio import write_bytes
+from .anim import Animation, ReduceOptions, animate, subtree_reach
+from .axes import points_y_up, quats_y_up
+from .mesh import TreeMesh, object_mesh
+
+FLOAT, USHORT, UINT = 5126, 5123, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+_IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
+
+
+class _Buffer:
+    """One binary buffer; every accessor gets its own 4-byte aligned view."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.length = 0
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+        self._times: dict[bytes, int] = {}
+
+    def add(self, array: np.ndarray, ctype: int, atype: str, target: int | None = None,
+            bounds: bool = False) -> int:
+        dtype = {FLOAT: np.float32, USHORT: np.uint16, UINT: np.uint32}[ctype]
+        data = np.ascontiguousarray(array, dtype=dtype)
+        raw = data.tobytes()
+        view = {"buffer": 0, "byteOffset": self.length, "byteLength": len(raw)}
+        if target is not None:
+            view["target"] = target
+        self.parts.append(raw + b"\0" * (-len(raw) % 4))
+        self.length += len(raw) + (-len(raw) % 4)
+        self.views.append(view)
+        acc = {"bufferView": len(self.views) - 1, "componentType": ctype,
+               "count": int(data.shape[0]), "type": atype}
+        if bounds:
+            flat = data.reshape(data.shape[0], -1)
+            acc["min"] = [_num(v) for v in flat.min(axis=0)]
+            acc["max"] = [_num(v) for v in flat.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def times(self, seconds: np.ndarray) -> int:
+        """A keyframe-time accessor (min/max set, as animation inputs need),
+        shared by every channel with the same keys."""
+        data = np.asarray(seconds, dtype=np.float32)
+        key = data.tobytes()
+        if key not in self._times:
+            self._times[key] = self.add(data, FLOAT, "SCALAR", bounds=True)
+        return self._times[key]
+
+    def blob(self) -> bytes:
+        return b"".join(self.parts)
+
+
+def _num(v) -> float | int:
+    """A JSON number that reads back as exactly the stored float32/int."""
+    if isinstance(v, np.integer):
+        return int(v)
+    f = float(v)
+    return int(f) if f.is_integer() and abs(f) < 2**53 else f
+
+
+def _floats(values) -> list[float]:
+    return [_num(np.float32(v)) for v in values]
+
+
+@dataclass
+class GltfResult:
+    """What was written: files, counts, keyframe-reduction report."""
+
+    files: list[Path] = field(default_factory=list)
+    joints: int = 0
+    vertices: int = 0
+    triangles: int = 0
+    animation: dict = field(default_factory=dict)
+
+
+class _Document:
+    def __init__(self, name: str, extras: dict | None = None) -> None:
+        self.extras = extras or {}
+        self.buf = _Buffer()
+        self.nodes: list[dict] = []
+        self.meshes: list[dict] = []
+        self.skins: list[dict] = []
+        self.materials: list[dict] = []
+        self.material_ids: dict[str, int] = {}
+        self.roots: list[int] = []
+        self.samplers: list[dict] = []
+        self.channels: list[dict] = []
+        self.name = name
+
+    def node(self, spec: dict, root: bool = False) -> int:
+        self.nodes.append(spec)
+        if root:
+            self.roots.append(len(self.nodes) - 1)
+        return len(self.nodes) - 1
+
+    def material(self, name: str, colour, double_sided: bool) -> int:
+        if name not in self.material_ids:
+            mat = {"name": name, "pbrMetallicRoughness": {
+                "baseColorFactor": _floats([*colour, 1.0]), "metallicFactor": 0,
+                "roughnessFactor": 0.9}}
+            if double_sided:
+                mat["doubleSided"] = True
+            self.materials.append(mat)
+            self.material_ids[name] = len(self.materials) - 1
+        return self.material_ids[name]
+
+    def mesh(self, mesh: TreeMesh, name: str, skinned: bool, offset: np.ndarray | None = None):
+        """Add `mesh` (world, Z up; minus `offset` for rigid objects)."""
+        b = self.buf
+        pos = points_y_up(mesh.positions)
+        attrs = {"POSITION": b.add(pos, FLOAT, "VEC3", ARRAY_BUFFER, bounds=True),
+                 "NORMAL": b.add(points_y_up(mesh.normals), FLOAT, "VEC3", ARRAY_BUFFER),
+                 "TEXCOORD_0": b.add(np.stack([mesh.uvs[:, 0], 1.0 - mesh.uvs[:, 1]], 1), FLOAT,
+                                     "VEC2", ARRAY_BUFFER)}
+        if skinned:
+            joints = np.zeros((mesh.n_vertices, 4), np.uint16)
+            weights = np.zeros((mesh.n_vertices, 4), np.float32)
+            joints[:, :2] = mesh.joints
+            w1 = mesh.weights[:, 1].astype(np.float32)
+            weights[:, 1] = w1
+            weights[:, 0] = np.float32(1.0) - w1
+            joints[:, 1] = np.where(w1 > 0, joints[:, 1], 0)
+            attrs["JOINTS_0"] = b.add(joints, USHORT, "VEC4", ARRAY_BUFFER)
+            attrs["WEIGHTS_0"] = b.add(weights, FLOAT, "VEC4", ARRAY_BUFFER)
+        prims = []
+        big = mesh.n_vertices >= 65535
+        for part in mesh.parts:
+            if len(part.faces) == 0:
+                continue
+            idx = b.add(part.faces.reshape(-1), UINT if big else USHORT, "SCALAR",
+                        ELEMENT_ARRAY_BUFFER)
+            prims.append({"attributes": attrs, "indices": idx,
+                          "material": self.material(part.material, part.colour,
+                                                    part.double_sided)})
+        self.meshes.append({"name": name, "primitives": prims})
+        return len(self.meshes) - 1
+
+    def channel(self, node: int, path: str, seconds: np.ndarray, values: np.ndarray) -> None:
+        b = self.buf
+        out = b.add(values, FLOAT, "VEC3" if path == "translation" else "VEC4")
+        self.samplers.append({"input": b.times(seconds), "output": out,
+                              "interpolation": "LINEAR"})
+        self.channels.append({"sampler": len(self.samplers) - 1,
+                              "target": {"node": node, "path": path}})
+
+    def encode(self, bin_uri: str | None) -> tuple[bytes, bytes]:
+        blob = self.buf.blob()
+        buffer = {"byteLength": len(blob)}
+        if bin_uri is not None:
+            buffer["uri"] = bin_uri
+        asset = {"version": "2.0", "generator": f"treebake {__version__}"}
+        if self.extras:
+            asset["extras"] = {"treebake": self.extras}
+        doc = {"asset": asset,
+               "scene": 0, "scenes": [{"name": self.name, "nodes": self.roots}],
+               "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
+        if self.skins:
+            doc["skins"] = self.skins
+        if self.channels:
+            doc["animations"] = [{"name": self.name, "samplers": self.samplers,
+                                  "channels": self.channels}]
+        doc["accessors"] = self.buf.accessors
+        doc["bufferViews"] = self.buf.views
+        doc["buffers"] = [buffer]
+        if not blob:
+            for key in ("accessors", "bufferViews", "buffers"):
+                doc.pop(key)
+        text = json.dumps(doc, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+        return text, blob
+
+
+def _trs(translation, rotation) -> dict:
+    spec = {}
+    t = _floats(translation)
+    if any(t):
+        spec["translation"] = t
+    q = _floats(rotation)
+    if tuple(q) != _IDENTITY_Q:
+        spec["rotation"] = q
+    return spec
+
+
+def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animation | None,
+              first: int) -> None:
+    """Tree i; its joints are rows first..first+S-1 of `anim`."""
+    tree = bake.trees[i]
+    if anim is None:
+        doc.node({"name": tree.name, "mesh": doc.mesh(mesh, tree.name, skinned=False)},
+                 root=True)
+        return
+    S = tree.n_segments
+    root = doc.node({"name": tree.name}, root=True)
+    base = len(doc.nodes)
+    for s in range(S):
+        doc.node({"name": tree.paths[s],
+                  **_trs(anim.translation[first + s], anim.rotation[first + s])})
+    children: dict[int, list[int]] = {}
+    for s in range(S):
+        children.setdefault(int(tree.seg_parent[s]), []).append(base + s)
+    doc.nodes[root]["children"] = children.get(-1, [])
+    for s, kids in children.items():
+        if s >= 0:
+            doc.nodes[base + s]["children"] = kids
+    rest = points_y_up(tree.points[tree.seg_start])
+    ibm = np.tile(np.eye(4, dtype=np.float64), (S, 1, 1))
+    ibm[:, 3, :3] = -rest  # column-major: the translation is the 4th column
+    ibm_acc = doc.buf.add(ibm.reshape(S, 16), FLOAT, "MAT4")
+    doc.skins.append({"name": tree.name, "inverseBindMatrices": ibm_acc,
+                      "skeleton": root, "joints": list(range(base, base + S))})
+    doc.node({"name": f"{tree.name}.mesh", "mesh": doc.mesh(mesh, tree.name, skinned=True),
+              "skin": len(doc.skins) - 1}, root=True)
+
+
+def scene_animation(bake: Bake, trees: list[int], objects: bool,
+                    opts: ReduceOptions) -> tuple[Animation | None, dict[int, int], int]:
+    """Channels for the animated trees in `trees` (and the projectiles), all
+    reduced together (vectorised), each tree with its own error check.
+    Returns the animation, each tree's first joint row, and the first
+    projectile row."""
+    moving = [i for i in trees if not bake.trees[i].static]
+    first: dict[int, int] = {}
+    parents, pos, rot, vec, reach, group = [], [], [], [], [], []
+    n = 0
+    for g, i in enumerate(moving):
+        t = bake.trees[i]
+        first[i] = n
+        parents.append(np.where(t.seg_parent >= 0, t.seg_parent + n, -1))
+        pos.append(points_y_up(t.positions))
+        rot.append(quats_y_up(t.rotations))
+        b, e = points_y_up(t.points[t.seg_start]), points_y_up(t.points[t.seg_end])
+        vec.append(e - b)
+        margin = float(t.leaf_size.max(initial=0.0)) + float(t.width.max(initial=0.0))
+        reach.append(subtree_reach(t.seg_parent, b, e) + margin)
+        group.append(np.full(t.n_segments, g))
+        n += t.n_segments
+    obj_first = n
+    if objects and bake.objects is not None and len(bake.objects.sizes):
+        o = bake.objects
+        k = len(o.sizes)
+        parents.append(np.full(k, -1))
+        pos.append(points_y_up(o.positions))
+        rot.append(quats_y_up(o.rotations))
+        vec.append(np.zeros((k, 3)))
+        reach.append(np.asarray(o.sizes, np.float64))
+        group.append(len(moving) + np.arange(k))
+    if not parents:
+        return None, first, obj_first
+    anim = animate(np.concatenate(parents), np.concatenate(pos, axis=1),
+                   np.concatenate(rot, axis=1), np.concatenate(vec), np.concatenate(reach),
+                   opts, np.concatenate(group))
+    return anim, first, obj_first
+
+
+def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objects: bool,
+          opts: ReduceOptions) -> tuple[_Document, Animation | None]:
+    # the frame grid, so a reader (treebake diff) can sample reduced channels
+    doc = _Document(name, {"fps": bake.fps, "frames": len(bake.times)})
+    anim, first, obj_first = scene_animation(bake, trees, objects, opts)
+    joint_node: dict[int, int] = {}
+    for i in trees:
+        if i in first:
+            joint_node[first[i]] = len(doc.nodes) + 1  # root node, then the joints
+        _add_tree(doc, bake, i, meshes[i], anim if i in first else None, first.get(i, 0))
+    if objects and bake.objects is not None:
+        o = bake.objects
+        shared: dict[tuple, int] = {}
+        for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
+            key = (shape, float(size))
+            if key not in shared:
+                shared[key] = doc.mesh(object_mesh(shape, float(size)), f"{shape} {size:g} m",
+                                       skinned=False)
+            joint_node[obj_first + k] = doc.node({
+                "name": f"projectile_{k}", "mesh": shared[key],
+                **_trs(anim.translation[obj_first + k], anim.rotation[obj_first + k])}, root=True)
+    if anim is not None:
+        rows = np.array(sorted(joint_node))
+        for ch in anim.channels:
+            r = int(rows[np.searchsorted(rows, ch.joint, side="right") - 1])
+            doc.channel(int(joint_node[r] + ch.joint - r), ch.path, bake.times[ch.frames],
+                        ch.values)
+    return doc, anim
+
+
+def write(path: str | Path, doc: _Document) -> list[Path]:
+    """.glb (one file) or .gltf (+ .bin beside it), atomically."""
+    path = Path(path)
+    if path.suffix == ".gltf":
+        bin_path = path.with_suffix(".bin")
+        text, blob = doc.encode(bin_path.name if doc.buf.length else None)
+        files = [write_bytes(path, text)]
+        if blob:
+            files.append(write_bytes(bin_path, blob))
+        return files
+    text, blob = doc.encode(None)
+    text += b" " * (-len(text) % 4)
+    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text
+    if blob:
+        chunks += struct.pack("<II", len(blob), 0x004E4942) + blob
+    header = struct.pack("<4sII", b"glTF", 2, 12 + len(chunks))
+    return [write_bytes(path, header + chunks)]
+
+
+def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
+                binary: bool = True, split: bool = False,
+                opts: ReduceOptions | None = None) -> GltfResult:
+    """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
+    `name.<tree>.glb`, and the projectiles in `name.objects.glb`."""
+    out = Path(out)
+    opts = opts or ReduceOptions()
+    ext = ".glb" if binary else ".gltf"
+    jobs: list[tuple[str, list[int], bool]]
+    if split:
+        jobs = [(f"{name}.{t.name}", [i], False) for i, t in enumerate(bake.trees)]
+        if bake.objects is not None and len(bake.objects.sizes):
+            jobs.append((f"{name}.objects", [], True))
+    else:
+        jobs = [(name, list(range(len(bake.trees))), True)]
+    result = GltfResult()
+    reports = []
+    for stem, trees, objects in jobs:
+        doc, anim = build(bake, stem, meshes, trees, objects, opts)
+        result.files += write(out / f"{stem}{ext}", doc)
+        if anim is not None:
+            reports.append(anim.report)
+    for i, m in enumerate(meshes):
+        result.vertices += m.n_vertices
+        result.triangles += m.n_triangles
+        if not bake.trees[i].static:
+            result.joints += bake.trees[i].n_segments
+    result.animation = merge_reports(reports)
+    return result
+
+
+def merge_reports(reports: list[dict]) -> dict:
+    if not reports:
+        return {}
+    out = {k: sum(r[k] for r in reports) for k in ("nodes", "channels", "channels_written",
+                                                   "keys_full", "keys_written",
+                                                   "trees_reduced", "trees_unreduced")}
+    out["frames"] = reports[0]["frames"]
+    out["max_position_error_m"] = max(r["max_position_error_m"] for r in reports)
+    out["max_angle_error_rad"] = max(r["max_angle_error_rad"] for r in reports)
+    return out

@@ -1,0 +1,227 @@
+"""Export a Bake to files: glTF (.glb / .gltf), OBJ sequences, USD, previews,
+into `out/<job>/` with a `manifest.json` (inputs, hashes, settings, files,
+frame range, sizes, keyframe reduction). The CLI's `export` and
+`bake --format` call `export_bake`. docs/formats.md describes every file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import __version__
+from .bake import Bake
+from .errors import InputError, TreebakeError
+from .exchange.anim import ReduceOptions
+from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
+from .fileio import atomic_path, write_text
+
+FORMATS = ("glb", "gltf", "obj", "usd", "usda", "preview")
+ALIASES = {"npz": None}  # the bake itself: always written by `treebake bake`
+
+Progress = Callable[[str, int, int], None]  # (stage, done, total)
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """formats: any of FORMATS; split: one glTF file per tree;
+    obj_stride: write every n-th frame of OBJ sequences; preview_size: px
+    per view panel."""
+
+    formats: tuple[str, ...] = ("glb",)
+    mesh: MeshOptions = field(default_factory=MeshOptions)
+    reduce: ReduceOptions = field(default_factory=ReduceOptions)
+    split: bool = False
+    obj_stride: int = 1
+    preview_size: int = 256
+
+
+@dataclass
+class ExportReport:
+    folder: Path
+    manifest: dict
+    files: list[Path] = field(default_factory=list)
+
+
+def parse_formats(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """"glb,obj" -> ("glb", "obj"), checked; "npz" is accepted and dropped."""
+    items = text.split(",") if isinstance(text, str) else list(text)
+    out: list[str] = []
+    for raw in items:
+        f = raw.strip().lower()
+        if not f:
+            continue
+        if f in ALIASES:
+            continue
+        if f not in FORMATS:
+            raise InputError(f"unknown export format {raw!r}; choose from: "
+                             f"{', '.join(FORMATS)} (comma-separated)")
+        if f not in out:
+            out.append(f)
+    return tuple(out)
+
+
+def check_options(opts: ExportOptions) -> None:
+    m, r = opts.mesh, opts.reduce
+    if not 3 <= m.radial <= 64:
+        raise InputError(f"--radial must be in 3..64, got {m.radial}")
+    if not 1 <= m.rings <= 16:
+        raise InputError(f"--rings must be in 1..16, got {m.rings}")
+    if opts.obj_stride < 1:
+        raise InputError(f"--stride must be >= 1, got {opts.obj_stride}")
+    if not (r.position_tolerance > 0 and math.isfinite(r.position_tolerance)):
+        raise InputError(f"--position-tolerance must be > 0 m, got {r.position_tolerance}")
+    if not (0 < r.angle_tolerance < math.pi):
+        raise InputError(f"--angle-tolerance must be in (0, 180) degrees, got "
+                         f"{math.degrees(r.angle_tolerance)}")
+    if not 64 <= opts.preview_size <= 2048:
+        raise InputError(f"--size must be in 64..2048 px, got {opts.preview_size}")
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def build_meshes(bake: Bake, opts: MeshOptions) -> tuple[list[TreeMesh], int]:
+    """Every tree's mesh, and how many joints broke (split in the mesh)."""
+    meshes, broken = [], 0
+    for t in bake.trees:
+        b = broken_joints(t)
+        broken += int(b.sum())
+        meshes.append(tree_mesh(t, opts, b))
+    return meshes, broken
+
+
+def _inputs(bake: Bake, bake_path: Path | None) -> dict:
+    meta = bake.meta
+    out = {"bake": None, "scene": meta.get("scene"), "scene_hash": meta.get("scene_hash"),
+           "baked_by": meta.get("tool"), "solver": meta.get("solver"), "seed": meta.get("seed"),
+           "trees": [{"name": t.name, "grammar": Path(str(t.info.get("grammar", ""))).name,
+                      "grammar_hash": t.info.get("grammar_hash"), "seed": t.info.get("seed"),
+                      "segments": t.n_segments, "static": t.static} for t in bake.trees]}
+    if bake_path is not None:
+        out["bake"] = {"file": bake_path.name, "sha256": sha256(bake_path),
+                       "bytes": bake_path.stat().st_size}
+    return out
+
+
+def _settings(opts: ExportOptions) -> dict:
+    m, r = opts.mesh, opts.reduce
+    return {"formats": list(opts.formats), "radial": m.radial, "rings_per_segment": m.rings,
+            "leaves": m.leaves, "min_radius_m": m.min_radius, "bark_tile_m": m.bark_tile,
+            "keyframe_reduction": r.enabled, "position_tolerance_m": r.position_tolerance,
+            "angle_tolerance_deg": round(math.degrees(r.angle_tolerance), 9),
+            "split": opts.split, "obj_stride": opts.obj_stride,
+            "preview_size_px": opts.preview_size, "up_axis": "Y", "units": "m"}
+
+
+def _rounded(report: dict) -> dict:
+    out = dict(report)
+    for k in ("max_position_error_m", "max_angle_error_rad"):
+        if k in out:
+            out[k] = float(f"{out[k]:.4g}")
+    if "max_angle_error_rad" in out:
+        out["max_angle_error_deg"] = float(f"{math.degrees(out['max_angle_error_rad']):.4g}")
+    if out.get("keys_full"):
+        out["keys_kept_fraction"] = round(out["keys_written"] / out["keys_full"], 4)
+    return out
+
+
+def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
+                opts: ExportOptions | None = None, bake_path: str | Path | None = None,
+                progress: Progress | None = None) -> ExportReport:
+    """Write the formats of `opts` into `out/<name>/` (name: the bake's
+    scene) and its manifest.json. Same bake and options -> same bytes."""
+    opts = opts or ExportOptions()
+    check_options(opts)
+    if not opts.formats:
+        raise InputError("no export format given")
+    if not bake.trees:
+        raise InputError("the bake has no trees")
+    name = name or str(bake.meta.get("scene") or "bake")
+    if not name or any(c in name for c in "/\\") or name in (".", ".."):
+        raise InputError(f"job name {name!r} cannot be a folder name")
+    folder = Path(out) / name
+    bake_path = Path(bake_path) if bake_path is not None else None
+    tick = progress or (lambda stage, done, total: None)
+    meshes, broken = build_meshes(bake, opts.mesh)
+    files: list[Path] = []
+    manifest: dict = {"tool": f"treebake {__version__}", "job": name,
+                      "inputs": _inputs(bake, bake_path), "settings": _settings(opts)}
+    n = len(bake.times)
+    manifest["frames"] = {"count": n, "fps": bake.fps, "first": 1, "last": n,
+                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1])}
+    manifest["sizes"] = {
+        "trees": len(bake.trees), "animated_trees": sum(not t.static for t in bake.trees),
+        "segments": sum(t.n_segments for t in bake.trees),
+        "joints": sum(t.n_segments for t in bake.trees if not t.static),
+        "broken_joints": broken, "vertices": sum(m.n_vertices for m in meshes),
+        "triangles": sum(m.n_triangles for m in meshes),
+        "leaf_quads": sum(2 * int((t.leaf > 0).sum()) for t in bake.trees)
+        if opts.mesh.leaves else 0,
+        "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
+    for fmt in ("glb", "gltf"):
+        if fmt in opts.formats:
+            from .exchange.gltf import export_gltf
+
+            tick(fmt, 0, 1)
+            res = export_gltf(bake, meshes, folder, name, binary=fmt == "glb", split=opts.split,
+                              opts=opts.reduce)
+            files += res.files
+            manifest["animation"] = _rounded(res.animation)
+            manifest["animation"]["tolerances"] = {
+                "position_m": opts.reduce.position_tolerance,
+                "angle_deg": round(math.degrees(opts.reduce.angle_tolerance), 9)}
+            tick(fmt, 1, 1)
+    if "obj" in opts.formats:
+        from .exchange.obj import export_obj
+
+        res = export_obj(bake, meshes, folder / "obj", name, opts.obj_stride,
+                         progress=lambda d, t: tick("obj", d, t))
+        files += res.files
+        manifest["frames"]["obj"] = {"stride": opts.obj_stride, "files": len(res.frames),
+                                     "first": res.frames[0] + 1, "last": res.frames[-1] + 1}
+    for fmt in ("usd", "usda"):
+        if fmt in opts.formats:
+            from .exchange.usd import export_usd
+
+            res = export_usd(bake, meshes, folder, name, ascii=fmt == "usda",
+                             progress=lambda d, t, f=fmt: tick(f, d, t))
+            if res.validation_errors:
+                raise TreebakeError("USD validation failed:\n  " +
+                                    "\n  ".join(res.validation_errors[:20]))
+            files += res.files
+            manifest["usd"] = {"time_codes": list(res.time_codes), "joints": res.joints,
+                               "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0}
+    if "preview" in opts.formats:
+        files += write_previews(bake, folder, name, opts.preview_size,
+                                progress=lambda d, t: tick("preview", d, t))
+    root = folder.resolve()
+    manifest["files"] = sorted(
+        ({"path": p.resolve().relative_to(root).as_posix(), "bytes": p.stat().st_size,
+          "sha256": sha256(p)} for p in files), key=lambda e: e["path"])
+    manifest["total_bytes"] = sum(e["bytes"] for e in manifest["files"])
+    man = write_text(folder / "manifest.json", json.dumps(manifest, indent=2) + "\n")
+    return ExportReport(folder, manifest, [*files, man])
+
+
+def write_previews(bake: Bake, folder: Path, name: str, size: int = 256,
+                   progress: Callable[[int, int], None] | None = None) -> list[Path]:
+    """`name.contact.png` (12 frames) and `name.gif` (the whole bake)."""
+    from .fileio import write_bytes
+    from .preview import animated_gif, contact_sheet
+
+    sheet = contact_sheet(bake, size=size)
+    png = folder / f"{name}.contact.png"
+    with atomic_path(png) as tmp:
+        sheet.save(tmp, format="PNG")
+    gif = write_bytes(folder / f"{name}.gif", animated_gif(bake, size=size, progress=progress))
+    return [png, gif]
