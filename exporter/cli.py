@@ -130,7 +130,12 @@ def cmd_bake(args) -> int:
     out = Path(args.out) / (args.name or scene.name)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     progress = None if args.quiet else _progress_bar("simulating")
-    bake = bake_scene(scene, solver=args.solver, log=log, progress=progress)
+    import os
+
+    workers = args.workers or os.cpu_count() or 1
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {args.workers}")
+    bake = bake_scene(scene, solver=args.solver, log=log, progress=progress, workers=workers)
     path = save_bake(bake, out / f"{out.name}.npz")
     exported = None
     if args.format is None and scene.formats:
@@ -374,6 +379,26 @@ def cmd_sway(args) -> int:
     return 0
 
 
+def cmd_accuracy(args) -> int:
+    from .accuracy import SCENARIOS, SPECIES, accuracy
+
+    for name, known, what in ((args.species, SPECIES, "species"),
+                              (args.scenarios, SCENARIOS, "scenario")):
+        for v in name or []:
+            if v not in known:
+                raise InputError(f"unknown {what} {v!r} (choose from {', '.join(known)})")
+    log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
+    data = accuracy(args.out, args.species, args.scenarios, args.duration, log=log)
+    if args.json:
+        print(json.dumps(data["summary"]))
+    else:
+        for s in data["summary"]:
+            print(f"{s['setting']:<20} {s['solver']:<7} {s['cpu_per_sim_second']:8.3f} cpu s/s "
+                  f"{s['rms_position_pct']:8.3f} % rms   f ratio {s['frequency_ratio']:.3f}")
+        print(f"written {Path(args.out) / 'report.md'}, report.json, plot.png")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="treebake",
@@ -416,6 +441,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="override the seed")
     p.add_argument("--wind", type=float, help="wind speed at 10 m, m/s (grammar jobs: "
                                                "default 6.7)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes sharing the simulation (default: the machine's cores; the "
+                        "bake is the same with any number)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress or notes on stderr")
     p.add_argument("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, "
@@ -492,6 +520,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quality", choices=("draft", "default", "final"), default="default")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_sway)
+
+    p = sub.add_parser("accuracy", help="error against run time: the LOD vs the full reference",
+                       description="Bake species x scenarios with the full 3D reference at a "
+                                   "fine step (the truth), then with every LOD setting and the "
+                                   "reference at coarser steps; write OUT/report.md, "
+                                   "report.json and plot.png (error against cost).")
+    p.add_argument("--out", default="out/accuracy", help="output folder (default: out/accuracy)")
+    p.add_argument("--species", nargs="*", help="species (default: sapling palm broadleaf "
+                                                "conifer)")
+    p.add_argument("--scenarios", nargs="*", help="scenarios (default: all)")
+    p.add_argument("--duration", type=float, default=6.0, help="seconds per case (default 6)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_accuracy)
 
     return parser
 

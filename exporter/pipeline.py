@@ -16,12 +16,12 @@ from .bake import Bake, ObjectsBake, tree_bake_from_model
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
 from .rig import RigOptions, build_rig
-from .rotations import apply, matrices_from_quaternions
+from .rotations import matrices_from_quaternions
 from .scene import QUALITIES, Quality, Scene
 from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
-from .sim.planar import REFINE, PlanarSolver
+from .sim.planar import REFINE
 from .turtle import interpret
 
 
@@ -94,7 +94,8 @@ def load_direction(scene: Scene, loads: SceneLoads, model: TreeModel,
     return None
 
 
-def _projectile_reaches(scene: Scene, model: TreeModel) -> bool:
+def projectile_reaches(scene: Scene, model: TreeModel) -> bool:
+    """Whether a projectile's ballistic path passes near the tree."""
     lo, hi = model.bounds()
     centre = 0.5 * (lo + hi)
     radius = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2])) + 1.0
@@ -116,32 +117,58 @@ def tree_quality(scene: Scene, spec) -> Quality:
     return QUALITIES[spec.quality] if spec.quality else scene.quality
 
 
-def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads,
-            quality: Quality | None) -> tuple[list[SimTree], dict[str, str]]:
-    """Rig every tree and decide which need simulating: trees that no force
-    reaches and that start at rest (gravity is balanced by the prestress)
-    stay static. Returns the trees and, for static ones, why."""
+def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads, quality: Quality | None,
+            log=None) -> tuple[list[SimTree], list[Quality], dict[str, str]]:
+    """Rig every tree, give it its quality, and decide which need
+    simulating. Static: trees the camera never sees (culling.py) and trees
+    that no force reaches and start at rest (the prestress balances
+    gravity). Trees the camera only ever sees from beyond `far` get its
+    `far_quality`. Returns the trees, their qualities, and why static ones
+    are static."""
+    log = log or (lambda msg: None)
     cuts = {c.tree: c for c in scene.cuts}
     pulls: dict[int, list] = {}
     for p in scene.pulls:
         pulls.setdefault(p.tree, []).append(p)
-    sim_trees, static = [], {}
+    bounds = [g.model.bounds() for g in grown]
+    centres = np.array([0.5 * (lo + hi) for lo, hi in bounds])
+    radii = np.array([0.5 * float(np.linalg.norm(hi - lo)) for lo, hi in bounds])
+    seen = np.ones(len(grown), dtype=bool)
+    far = np.zeros(len(grown), dtype=bool)
+    if scene.camera is not None:
+        from .culling import cull
+
+        c = cull(scene.camera, scene.duration, centres, radii)
+        seen, far = c.seen, c.nearest > scene.camera.far
+    sim_trees, qualities, static = [], [], {}
+    counts = {"unseen": 0, "far": 0, "no_force": 0}
     for i, g in enumerate(grown):
         m = g.model
         q = quality or tree_quality(scene, g.spec)
-        rig = build_rig(m, RigOptions(min_bone_length=q.bone_length * max(m.height, 1e-3)))
-        lo, hi = m.bounds()
-        centre = 0.5 * (lo + hi)
-        radius = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2]))
+        if far[i] and quality is None and g.spec.quality is None and not scene.projectiles:
+            q = QUALITIES[scene.camera.far_quality]
+            counts["far"] += seen[i]
+        lo, hi = bounds[i]
         reached = (not scene.prestress or i in cuts or i in pulls
-                   or loads.quiet_after(centre, radius, float(hi[2])) > 0
-                   or (scene.projectiles and _projectile_reaches(scene, m)))
-        if not reached:
+                   or loads.quiet_after(centres[i], 0.5 * float(np.linalg.norm(hi[:2] - lo[:2])),
+                                        float(hi[2])) > 0
+                   or (scene.projectiles and projectile_reaches(scene, m)))
+        active = bool(reached and seen[i])
+        if not seen[i]:
+            static[m.name] = "outside the camera's view for the whole shot"
+            counts["unseen"] += 1
+        elif not reached:
             static[m.name] = "no force reaches it (gravity is balanced by the prestress)"
+            counts["no_force"] += 1
+        rig = build_rig(m, RigOptions(min_bone_length=q.bone_length * max(m.height, 1e-3)))
         sim_trees.append(SimTree(m.name, rig, q.planes,
                                  load_direction(scene, loads, m, cuts.get(i), pulls.get(i)),
-                                 cuts.get(i), pulls.get(i, []), active=bool(reached)))
-    return sim_trees, static
+                                 cuts.get(i), pulls.get(i, []), active=active))
+        qualities.append(q)
+    if scene.camera is not None:
+        log(f"culling: {counts['unseen']} trees never in view, {counts['far']} far "
+            f"({scene.camera.far_quality}), {counts['no_force']} reached by no force")
+    return sim_trees, qualities, static
 
 
 def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
@@ -169,9 +196,12 @@ def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
 
 
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
-               log=None, progress=None) -> Bake:
+               log=None, progress=None, workers: int = 1,
+               timestep: float | None = None) -> Bake:
     """Grow, rig, simulate and bake a scene. `quality` overrides the scene's
-    (and every tree's). Deterministic: the same inputs give the same bake."""
+    (and every tree's); `workers` processes share the planar LOD's chunks;
+    `timestep` (s) is the full reference's step (default: its own).
+    Deterministic: the same inputs give the same bake, whatever `workers`."""
     log = log or (lambda msg: None)
     started = time.perf_counter()
     if quality is not None:
@@ -180,8 +210,9 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     grown = grow(scene)
     lo = np.min([g.model.points.min(0) for g in grown], axis=0)
     hi = np.max([g.model.points.max(0) for g in grown], axis=0)
-    loads = SceneLoads(scene, np.array([lo[:2] - 20, hi[:2] + 20]))
-    sim_trees, static = prepare(scene, grown, loads, quality)
+    extent = np.array([lo[:2] - 20, hi[:2] + 20])
+    loads = SceneLoads(scene, extent)
+    sim_trees, qualities, static = prepare(scene, grown, loads, quality, log)
     active = [t for t in sim_trees if t.active]
     log(f"{len(grown)} trees, {len(active)} simulated, "
         f"{sum(t.rig.n_bones for t in active)} bones, solver {solver}, quality {q.name}")
@@ -195,29 +226,31 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     motions: dict[str, TreeMotion] = {}
     objects = None
     if active and solver == "planar":
-        sim = PlanarSolver(sim_trees, scene, q, loads, log=log)
-        for tree, motion in zip(active, sim.run(progress)):
-            motions[tree.name] = motion
-        st = sim.stats
-        meta["substep"] = sim.h
-        meta["force_interval"] = sim.dt_update
+        from .sim.run import merge_stats, simulate
+
+        motions, chunks = simulate(sim_trees, qualities, scene, extent, workers, log, progress)
+        st = merge_stats(chunks)
+        meta["substep"] = min(c.h for c in chunks)
+        meta["force_interval"] = min(c.dt_update for c in chunks)
+        meta["chunks"] = len(chunks)
         meta["stats"] = {k: v for k, v in asdict(st).items()
                          if k not in ("notes", "step_seconds", "update_seconds", "first_limit")}
         meta["stats"]["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
-        meta["notes"] = _planar_notes(st, q, sim.h)
+        meta["notes"] = _planar_notes(st, q, meta["substep"])
         timing.update(step_seconds=round(st.step_seconds, 3),
                       update_seconds=round(st.update_seconds, 3),
-                      segment_steps=sum(t.rig.model.n_segments for t in active) * st.substeps)
-        if sim.projectiles is not None:
-            pr = sim.projectiles
-            objects = ObjectsBake(pr.shape, pr.size, pr.track_pos, pr.track_quat)
+                      segment_steps=sum(c.segments * c.stats.substeps for c in chunks))
+        for c in chunks:
+            if c.objects is not None:
+                objects = ObjectsBake(*c.objects)
     elif active:
         from .sim.reference import ReferenceSolver
 
-        ref = ReferenceSolver(sim_trees, scene, q, loads, log=log)
+        ref = ReferenceSolver(sim_trees, scene, q, loads, log=log, timestep=timestep)
         for tree, motion in zip(active, ref.run(progress)):
             motions[tree.name] = motion
         meta.update(ref.meta())
+        timing.update({k: round(v, 3) for k, v in ref.timing.items()})
         objects = ref.objects()
     for note in meta.get("notes", []):
         log(note)
@@ -257,12 +290,8 @@ def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None)
     if quats is None:
         rot = np.tile([0.0, 0.0, 0.0, 1.0], (1, model.n_segments, 1))
         return rest_base[None].copy(), rot
-    frames = quats.shape[0]
-    pos = np.empty((frames, model.n_segments, 3))
-    rot = np.empty((frames, model.n_segments, 4))
+    q = quats[:, sb]  # (F, S, 4)
+    r = matrices_from_quaternions(q.reshape(-1, 4)).reshape(q.shape[0], len(sb), 3, 3)
     offset = rest_base - rig.pivot[sb]
-    for f in range(frames):
-        q = quats[f][sb]
-        pos[f] = pivots[f][sb] + apply(matrices_from_quaternions(q), offset)
-        rot[f] = q
-    return pos, rot
+    pos = pivots[:, sb] + np.einsum("fsij,sj->fsi", r, offset)
+    return pos, q

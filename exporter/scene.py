@@ -35,7 +35,9 @@ class Quality:
     height (0 = one bone per segment). stability: the largest allowed
     omega*h of any joint before a rotary-inertia floor is applied
     (see docs/physics.md). joint_correction: fraction of a joint's position
-    error corrected per substep."""
+    error corrected per substep. coupling: how a parent chain carries its
+    children (docs/physics.md): "apparent" (their apparent mass at the
+    parent's frequency) or "rigid"."""
 
     name: str = "default"
     substep_rate: float = 960.0
@@ -45,6 +47,7 @@ class Quality:
     bone_length: float = 0.0
     stability: float = 1.0
     joint_correction: float = 0.02
+    coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
 
 
 QUALITIES = {
@@ -401,7 +404,7 @@ def _quality(r: _Reader, q: Any) -> Quality:
     q = r.table(q, "quality")
     p = "quality."
     r.check_keys(q, p, {"base", "substep_rate", "force_rate", "iterations", "planes",
-                        "bone_length", "stability", "joint_correction"})
+                        "bone_length", "stability", "joint_correction", "coupling"})
     base = QUALITIES[r.string(q, "base", p, "default", tuple(QUALITIES))]
     out = Quality(
         name="custom",
@@ -412,6 +415,7 @@ def _quality(r: _Reader, q: Any) -> Quality:
         bone_length=r.number(q, "bone_length", p, base.bone_length, 0.0, 0.5),
         stability=r.number(q, "stability", p, base.stability, 0.1, 2.0),
         joint_correction=r.number(q, "joint_correction", p, base.joint_correction, 0.0, 0.4),
+        coupling=r.string(q, "coupling", p, base.coupling, ("apparent", "rigid")),
     )
     if out.force_rate > out.substep_rate:
         raise r.fail("quality.force_rate", f"= {out.force_rate:g} Hz must not exceed "

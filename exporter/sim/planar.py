@@ -73,6 +73,7 @@ PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
 REFINE = 8  # pymunk steps per substep while an impulsive load acts
 REFINE_SPIN = 0.015  # rad: ... or while a body turns this much in a substep
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
+FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
 SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
 
 
@@ -223,7 +224,8 @@ class PlanarSolver:
         for ci, p in enumerate(self.chain_parent):
             if p >= 0:
                 r = omega[self.bone_chain[p]] / max(omega[ci], 1e-9)
-                factor[ci] = apparent_mass(r, zeta[ci])
+                factor[ci] = apparent_mass(r, zeta[ci]) \
+                    if self.quality.coupling == "apparent" else 1.0
         anc, dsc, via = [], [], []
         for b in range(self.n):
             below, p = b, self.bone_frame[b]
@@ -277,21 +279,44 @@ class PlanarSolver:
         self._layout()
 
     def _layout(self) -> None:
-        """Per depth, a padded grid (rows x length) of sub-chains; a chain
-        splits into rows where a joint has broken."""
+        """Per depth, a padded grid (rows x length) of sub-chains (a chain
+        splits into rows where a joint has broken), and the rest-pose
+        quantities the reconstruction needs, computed once."""
         self.levels = []
         for depth in range(int(self.chain_depth.max()) + 1 if len(self.chain_depth) else 0):
             rows = []
             for ci in np.nonzero(self.chain_depth == depth)[0]:
                 bones = self.chain_bones[ci]
                 starts = [i for i, b in enumerate(bones) if self.row_start[b]]
-                for a, z in zip(starts, starts[1:] + [len(bones)]):
+                for a, z in zip(starts, [*starts[1:], len(bones)]):
                     rows.append(bones[a:z])
             grid = np.full((len(rows), max(len(r) for r in rows)), -1, dtype=np.int64)
             for i, r in enumerate(rows):
                 grid[i, :len(r)] = r
             valid = grid >= 0
-            self.levels.append((grid, valid, grid[valid], grid[:, 0]))
+            bones = grid[valid]
+            heads = grid[:, 0]
+            p = self.bone_frame[bones]
+            has = p >= 0
+            first = self.chain_first[self.bone_chain[bones]]
+            head_first = self.chain_first[self.bone_chain[heads]]
+            self.levels.append({
+                "grid": grid, "valid": valid, "bones": bones, "heads": heads,
+                "head_pos": np.searchsorted(np.flatnonzero(valid.ravel()),
+                                            np.arange(len(rows)) * grid.shape[1]),
+                "p": p, "has": has, "pp": p[has], "any": bool(has.any()),
+                "attach_rest": self.pivot0[first],
+                "attach_arm": self.pivot0[first[has]] - self.pivot0[p[has]],
+                "head_arm": self.pivot0[heads] - self.pivot0[head_first],
+                "step": self.tip0[bones] - self.pivot0[bones]})
+        self._refresh_cog()
+
+    def _refresh_cog(self) -> None:
+        """Rest offsets of the lumped COGs (they change when a part breaks off)."""
+        arm = self.lump_cog0 - self.pivot0
+        for level in self.levels:
+            level["cog_arm"] = arm[level["bones"]]
+            level["cog_arm_p"] = arm[level["pp"]]
 
     def _space(self) -> None:
         """pymunk bodies and joints, rest angles (prestress), stability rule."""
@@ -319,6 +344,8 @@ class PlanarSolver:
         self.planes_of_bone = np.maximum(np.bincount(self.body_bone, minlength=self.n), 1)
         self.body_of_bone0 = np.asarray([self.body_of[(b, 0)] for b in range(self.n)],
                                         dtype=np.int64)
+        b1 = np.asarray([self.body_of.get((b, 1), -1) for b in range(self.n)], dtype=np.int64)
+        self.plane_rows = (self.body_of_bone0, b1, np.nonzero(b1 >= 0)[0])
         first = self.chain_first[self.bone_chain[self.body_bone]]
         origin = self.pivot0[first]  # a chain's 2D origin: its base at rest
 
@@ -452,20 +479,27 @@ class PlanarSolver:
         """3D pose and velocity of every bone from the 2D chains, level by
         level from the roots (children ride on their parents); debris bones
         from their rigid bodies."""
-        n, s, bb = self.n, self.state, self.body_bone
-
-        def per_bone(values: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-            out = np.empty((n, 3))
-            for ax in range(3):
-                out[:, ax] = np.bincount(bb, values * vectors[:, ax], minlength=n)
-            return out
-
-        share = 1.0 / self.planes_of_bone[bb]  # the axial (d) part is in every plane
-        rho = per_bone(s[:, 2], self.body_n)
+        n, s = self.n, self.state
+        b0, b1, two = self.plane_rows
+        # plane 0 of every bone, plus plane 1 where a bone has one; the axial
+        # (d) part is simulated in every plane: average it
         disp = s[:, 0:2] - self.q0
-        off = per_bone(disp[:, 0], self.body_e) + per_bone(share * disp[:, 1], self.body_d)
-        vrel = per_bone(s[:, 3], self.body_e) + per_bone(share * s[:, 4], self.body_d)
-        wrel = per_bone(s[:, 5], self.body_n)
+        rho = s[b0, 2:3] * self.body_n[b0]
+        off = disp[b0, 0:1] * self.body_e[b0]
+        vrel = s[b0, 3:4] * self.body_e[b0]
+        wrel = s[b0, 5:6] * self.body_n[b0]
+        axial = disp[b0, 1:2]
+        v_axial = s[b0, 4:5]
+        if len(two):
+            c = b1[two]
+            rho[two] += s[c, 2:3] * self.body_n[c]
+            off[two] += disp[c, 0:1] * self.body_e[c]
+            vrel[two] += s[c, 3:4] * self.body_e[c]
+            wrel[two] += s[c, 5:6] * self.body_n[c]
+            axial[two] = 0.5 * (axial[two] + disp[c, 1:2])
+            v_axial[two] = 0.5 * (v_axial[two] + s[c, 4:5])
+        off += axial * self.body_d[b0]
+        vrel += v_axial * self.body_d[b0]
         own = matrices_from_rotvec(rho)
         rot = np.empty((n, 3, 3))
         pivot = np.empty((n, 3))
@@ -473,34 +507,31 @@ class PlanarSolver:
         omega = np.empty((n, 3))
         frame_rot = np.empty((n, 3, 3))
         attach = np.empty((n, 3))
-        for grid, valid, bones, heads in self.levels:
-            p = self.bone_frame[bones]
-            has = p >= 0
-            first = self.chain_first[self.bone_chain[bones]]
+        for lv in self.levels:
+            bones, has, pp = lv["bones"], lv["has"], lv["pp"]
             rp = np.broadcast_to(EYE, (len(bones), 3, 3)).copy()
-            at = self.pivot0[first].copy()
-            if has.any():
-                pp = p[has]
+            at = lv["attach_rest"].copy()
+            if lv["any"]:
                 rp[has] = rot[pp]
-                at[has] = pivot[pp] + apply(rot[pp], self.pivot0[first[has]] - self.pivot0[pp])
+                at[has] = pivot[pp] + apply(rot[pp], lv["attach_arm"])
             frame_rot[bones] = rp
             attach[bones] = at
             r = compose(rp, own[bones])
             rot[bones] = r
             # pivots: each row's head from its own state, the rest follow the chain
-            head = at + apply(rp, self.pivot0[bones] - self.pivot0[first] + off[bones])
+            grid, valid = lv["grid"], lv["valid"]
+            h = lv["head_pos"]
+            heads = lv["heads"]
+            head = at[h] + apply(rp[h], lv["head_arm"] + off[heads])
             step = np.zeros(grid.shape + (3,))
-            step[valid] = apply(r, self.tip0[bones] - self.pivot0[bones])
-            start = np.zeros(grid.shape + (3,))
-            start[valid] = head
-            piv = start[:, :1, :] + np.cumsum(step, axis=1) - step
+            step[valid] = apply(r, lv["step"])
+            piv = head[:, None, :] + np.cumsum(step, axis=1) - step
             pivot[bones] = piv[valid]
-            cog = pivot[bones] + apply(r, self.lump_cog0[bones] - self.pivot0[bones])
+            cog = pivot[bones] + apply(r, lv["cog_arm"])
             v = apply(rp, vrel[bones])
             w = apply(rp, wrel[bones])
-            if has.any():
-                pp = p[has]
-                cog_p = pivot[pp] + apply(rot[pp], self.lump_cog0[pp] - self.pivot0[pp])
+            if lv["any"]:
+                cog_p = pivot[pp] + apply(rot[pp], lv["cog_arm_p"])
                 v[has] += vcog[pp] + cross(omega[pp], cog[has] - cog_p)
                 w[has] += omega[pp]
             vcog[bones] = v
@@ -757,6 +788,8 @@ class PlanarSolver:
         self.events.append((t, tree, f"{path}: {why}"))
         self.stats.broken += 1
         freed = self._outboard(bone)
+        if self.parent[bone] < 0:  # uprooted
+            self._rigid_lumps(int(self.bone_tree[bone]))
         if self.bone_frame[bone] < 0:
             for k in range(self.planes_of_bone[bone]):
                 i = self.body_of[(bone, k)]
@@ -784,6 +817,10 @@ class PlanarSolver:
                     self.space.remove(self.bodies[i])
                 self.state[i] = [*self.q0[i], 0.0, 0.0, 0.0, 0.0]
             self.planes_of_bone[b] = 1
+        b0, b1, _ = self.plane_rows
+        b1 = b1.copy()
+        b1[bones] = -1
+        self.plane_rows = (b0, b1, np.nonzero(b1 >= 0)[0])
         self._buffers()
 
     def _outboard(self, bone: int) -> np.ndarray:
@@ -822,6 +859,7 @@ class PlanarSolver:
         self._lump()
         for a in changed:
             self._relump(int(a))
+        self._refresh_cog()
 
     def _relump(self, bone: int) -> None:
         """Give a body its new lumped mass after part of what it carried went."""
@@ -862,6 +900,31 @@ class PlanarSolver:
                 self._to_debris(freed, pose, asleep=True)
                 self.events.append((t, self.trees[ti].name, "came to rest on the ground"))
 
+    def _nudge(self, root: int, w: float) -> None:
+        """Turn a root chain (plane 0) as one rigid body about its pivot at
+        `w` rad/s (negative tips the top toward +e): every body gets the
+        velocity of that rotation, so the push is not undone by the joints."""
+        pivot = self.bodies[self.body_of[(root, 0)]].position
+        for b in self.chain_bones[self.bone_chain[root]]:
+            body = self.bodies[self.body_of[(int(b), 0)]]
+            cog = body.local_to_world(body.center_of_gravity)
+            body.angular_velocity = w
+            body.velocity = (-w * (cog.y - pivot.y), w * (cog.x - pivot.x))
+
+    def _rigid_lumps(self, tree: int) -> None:
+        """A falling tree turns as one body, not about its sway frequency: its
+        children's apparent mass (a sway quantity) gives way to plain rigid
+        lumping, or the fall would be slowed by their extra inertia."""
+        lo, hi = self.offsets[tree], self.offsets[tree + 1]
+        mine = (self.pair_anc >= lo) & (self.pair_anc < hi)
+        if not mine.any() or np.all(self.pair_weight[mine] == 1.0):
+            return
+        self.pair_weight = np.where(mine, 1.0, self.pair_weight)
+        self._lump()
+        for a in np.unique(self.pair_anc[mine]):
+            self._relump(int(a))
+        self._refresh_cog()
+
     def handle_cuts(self, t: float) -> None:
         """Felling: at the cut the root joints lose spring and cone (the
         hinge holds) and the tree is nudged toward the felling direction;
@@ -874,6 +937,7 @@ class PlanarSolver:
                      if self.chain_tree[ci] == ti and self.chain_parent[ci] < 0]
             state = self.cut_state.get(ti, "standing")
             if state == "standing" and t >= cut.time:
+                self._rigid_lumps(ti)
                 for b in roots:
                     # plane 0 contains the felling direction: the notch frees
                     # it; sideways (plane 1) the hinge wood still holds
@@ -881,7 +945,7 @@ class PlanarSolver:
                     self._remove_joint(i, (SPRING, LIMIT))
                     for k in range(self.planes_of_bone[b]):
                         self.breakable[self.body_of[(b, k)]] = False
-                    self.bodies[i].angular_velocity = -0.05  # tips the top toward +e
+                    self._nudge(b, FELL_NUDGE)
                 self.cut_state[ti] = "hinged"
                 self.events.append((t, tree.name, "cut at the base"))
             elif state == "hinged":

@@ -1,9 +1,9 @@
 """The full-3D reference: the rig in MuJoCo, to measure the planar LOD's
 error and to give users the slow, accurate answer.
 
-Model (one MuJoCo model per tree; trees a projectile can reach share one
-with the projectiles, since compile time grows about quadratically with the
-bodies in a model):
+Model (one MuJoCo model per tree, stepped side by side: compile time grows
+faster than linearly with the bodies in a model; trees a projectile can
+reach share one model with the projectiles):
 
 - One body per bone, nested as the rig's bones are. A body's frame sits at
   the bone's pivot with the world's orientation at rest, so its pose *is*
@@ -12,71 +12,103 @@ bodies in a model):
 - The joint at a bone's base: two hinges at the pivot, both perpendicular to
   the bone's axis (swing without twist), each with the rig's stiffness k and
   range +-cone (so the cone is a square of side 2 cone in the two swing
-  angles, not a circle). Spring references hold the grown shape in static
-  equilibrium under gravity (`prestress`): ref = (gravity torque at rest) / k.
+  angles, not a circle). With `prestress`, spring references make the grown
+  shape the static equilibrium under gravity: ref = (gravity torque at
+  rest, MuJoCo's qfrc_bias) / k; a calm tree stays still to 1e-19 m.
 - A capsule per bone, `bone_ratio` x its length, centred on it. It collides
-  (with the ground and projectiles, never with other bones) only when the
-  scene has a ground and something can fall on it (projectiles, a cut,
-  breakable joints); bones whose capsule pokes into the ground at rest do not
-  touch the ground while their tree stands.
+  with the ground and projectiles (never with other bones) only when the
+  scene has a ground and something can fall (projectiles, a cut, breakable
+  joints); otherwise contacts are off. Bones whose capsule pokes into the
+  ground at rest do not touch it while their tree stands. Contacts have
+  rolling friction (ROLLING): soft ground stops rolling sticks and balls.
 - Gravity is MuJoCo's (the same vector as SceneLoads.g). Air, blasts,
-  attractors and pulls are world forces at the bones' COMs (`xfrc_applied`),
-  re-evaluated every `force_every` steps and held between. External loads
-  are capped at MAX_ACCELERATION x mass, as in the planar LOD, and counted.
-- Structural damping: the rig's mass-proportional damping, relative to each
-  bone's limb frame (the bone its limb hangs on; the world for root limbs):
-  force -alpha m v_rel at the COM and torque -alpha I omega_rel, with
-  alpha replaced by (1 - exp(-alpha h)) / h (an exact decay over a step).
-  Applied every step as an external wrench, with the equal and opposite
-  reaction on the frame bone, so it is an internal force that only ever
-  removes energy. (The planar LOD applies it one way, without reaction.)
+  attractors and pulls (as the planar LOD's `pull_forces`) are world forces
+  at the bones' COMs (`xfrc_applied`), evaluated at `force_rate` (500 Hz;
+  drag and gusts change far slower, blasts are averaged over the interval
+  by SceneLoads) and held between; capped at MAX_ACCELERATION x mass as in
+  the planar LOD, and counted.
+- Structural damping: the rig's mass-proportional damping of each bone's
+  motion relative to its limb's frame (the bone the limb hangs on; the
+  world for root limbs), with what the limb carries moving with it, as in
+  the planar LOD's lumped bodies and in the Rayleigh quotient behind
+  rig.alpha: in joint space, each limb's joints get -alpha M_LL qdot_L, with
+  M_LL the limb's block of MuJoCo's mass matrix (its bones and all they
+  carry, at the current pose) and qdot_L its own joint rates; alpha is
+  replaced by (1 - exp(-alpha h)) / h (an exact decay over a step). Joint
+  torques act on the frame bone too (reaction), and M_LL is positive
+  definite, so the damping only ever removes energy. Applied every step as
+  qfrc_applied (explicit; a Cartesian version held over 2 ms went unstable
+  on a willow's light twigs carrying heavy curtains). Pulled and released
+  in still air, the first-mode damping ratios come out near the grammars'
+  (sapling 0.086, palm 0.081, oak 0.076 for 0.08, 0.08, 0.10; planar LOD
+  0.090, 0.088, 0.120), frequencies within 1.2 % of the planar LOD's.
 
 Integrator, measured on the 10 m x 0.2 m cantilever (E = 8 GPa, rho = 800
 kg/m^3, 30 bones, no gravity, released from its static deflection under a
 tip load; beam f1 = 0.8848 Hz; zeta = damping ratio of the free decay, all
-of it numerical; cost per body-step on this machine, one model):
+of it numerical; MuJoCo's cost per body-step on this machine, one model):
 
-    integrator     joint damping   h        f1 error   zeta     us/body-step
-    euler          0               <=1/4000 unstable
-    implicitfast   0               <=1/4000 unstable
-    implicit       0               <=1/2000 unstable
-    rk4            0 or k h / 2    >=1/2000 unstable   (1/4000: -0.11 %)
-    euler          k h / 2         1/240    -0.06 %    0.0049   1.1
-    implicitfast   k h / 2         1/240    -0.06 %    0.0049   1.2
-    implicit       k h / 2         1/240    -0.06 %    0.0049   6-7
-    discrete       0               1/240    -0.01 %    0.0104   1.2
-    discrete       0               1/480    -0.06 %    0.0049   1.3
-    discrete       0               1/1000   -0.09 %    0.0022   1.1
-    discrete       0               1/2000   -0.11 %    0.0011   1.0
-    discrete       0               1/4000   -0.11 %    0.0007   0.9
+    integrator     joint damping   h                f1 error   zeta    us/body-step
+    euler          0               1/240 .. 1/4000  unstable
+    implicitfast   0               1/240 .. 1/4000  unstable
+    implicit       0               1/240 .. 1/4000  unstable
+    rk4            0               1/240 .. 1/2000  unstable
+    rk4            0               1/4000           -0.11 %    0.0001  3.5
+    euler          k h / 2         1/240            -0.06 %    0.0049  1.1-1.3
+    implicitfast   k h / 2         1/240            -0.06 %    0.0049  1.1-1.3
+    implicit       k h / 2         1/240            -0.06 %    0.0049  7-9
+    discrete       0               1/240            -0.01 %    0.0104  1.1-1.8
+    discrete       0               1/480            -0.06 %    0.0049  1.1
+    discrete       0               1/1000           -0.09 %    0.0022  1.1-1.4
+    discrete       0               1/2000           -0.11 %    0.0011  1.0-1.3
+    discrete       0               1/4000           -0.11 %    0.0007  0.9-1.1
 
 (-0.11 % is the 30-bone chain's own error against the beam.) Only
 `discrete` (the constraint solve and the velocity update in the metric
 M + hD + h^2 K, i.e. implicit in the joint stiffness) is stable at wood
 stiffness with no added damping; the others need joint damping c >= k h / 2,
 a stiffness-proportional damping the rig does not have. Every stable choice
-holds f1 within 0.15 % even at 1/240 s: the step is bounded by the numerical
-damping instead, zeta ~ pi f1 h for `discrete`. DEFAULT_TIMESTEP = 1/2000 s
-keeps it near 0.001 for f1 ~ 1 Hz (the structural damping of trees is
-0.01-0.08); `TIMESTEPS` lists coarser steps for the error-vs-cost report, and
-meta() states the added damping of each run.
+holds f1 within 0.15 % even at 1/240 s, so the step is set by the numerical
+damping, zeta ~ pi f1 h for `discrete`: DEFAULT_TIMESTEP = 1/2000 s keeps it
+near 0.001 at f1 ~ 1 Hz, small against trees' 0.05-0.3 (design.md); meta()
+states it for each run, and TIMESTEPS lists coarser steps for the error-vs-
+cost report. With the structural damping (zeta = 0.05) the cantilever decays
+at 0.0518, and f1 moves by under 0.05 % for load rates from 240 Hz to every
+step.
 
-Events: felling removes the cut root joint's felling-direction hinge spring
-and limit (the sideways hinge holds, like hinge wood) and nudges the tree
-over; past `hinge` degrees of lean the root joint is removed and the tree
-falls free onto the ground. A joint whose bending moment (hinge springs plus
-limit forces) exceeds its `strength` breaks: the bone and everything it
-carries become a free body (a snapped branch, or an uprooted tree). Removing
-a joint rebuilds that model (a few ms) and carries the state over exactly;
-a freed part is then damped relative to its own first bone only (its rigid
-motion is not damped), and its first bone's principal moments of inertia
-are floored at MIN_INERTIA_RATIO of the largest (as the planar LOD's debris:
-a thin stick would otherwise roll and spin about its own axis unboundedly). Not modelled: collisions between bones (also of
-different trees), projectiles' air drag.
+Cost (this machine, breeze with gusts, 1/2000 s steps, loads at 500 Hz, per
+body-step): MuJoCo 1.1-1.7 us, the Python side (loads, damping, events)
+0.5-1.9 us, falling with tree size: sapling (57 bones) 3.0 us in all, palm
+(89) 3.3, oak (424) 2.1, spruce (506) 1.8, willow (1444, 12 breaks) 2.1;
+about twice the planar LOD's wall time on the same pull-and-release scenes.
+Models are stepped one after another in one thread, so results cannot
+depend on timing: the same inputs give bit-identical bakes.
+
+Events: felling removes the spring and limit of the cut root joint's
+felling-direction hinge (the sideways hinge holds, like hinge wood) and
+nudges the tree over; past `hinge` degrees of lean the root joint goes and
+the tree falls free onto the ground. A joint whose bending moment (hinge
+springs plus limit constraint forces) exceeds its `strength` breaks: the
+bone and all it carries become a free part (a snapped branch, or an
+uprooted tree). A part broken off a standing tree moves to that tree's
+debris model (rebuilt; it is small) while its bodies stay in the tree's
+model massless, frozen and inert, so a big tree is never recompiled for a
+twig; a felled or uprooted tree, or a scene with projectiles, rebuilds its
+model. Poses and velocities carry over exactly (1e-14). A free part's own
+motion (its first bone's free joint) and a cut tree's felling hinge are not
+damped, only their bending; a free part's first bone has its principal
+moments of inertia floored at MIN_INERTIA_RATIO of the
+largest, and a free part's spin is clamped at MAX_SPIN (counted), as the
+planar LOD's debris: a thin stick would otherwise roll without bound (a
+stick rolled under a sliding box). Bones of a free part are checked against
+MAX_ANGULAR_SPEED relative to the part's first bone. Not modelled:
+collisions between bones (of one tree or of different trees); projectiles'
+air drag. Projectiles do collide with each other (the planar LOD's don't).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -102,6 +134,7 @@ SETTLE_TIME = 0.5  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 LIMIT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
+XBODY = mujoco.mjtObj.mjOBJ_XBODY  # a body's frame (mjOBJ_BODY is its COM frame)
 BAD = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL,
        mujoco.mjtWarning.mjWARN_BADQPOS)
 
@@ -148,9 +181,9 @@ class Stats:
 
     steps: int = 0
     updates: int = 0
-    models: int = 0
     bodies: int = 0
-    rebuilds: int = 0
+    rebuilds: int = 0  # models recompiled in place (felled, uprooted; projectile scenes)
+    parts: int = 0  # parts broken off standing trees (into their trees' debris models)
     limited: int = 0  # bone updates whose external load was capped
     clamped: int = 0  # updates at which a free part's spin was clamped to MAX_SPIN
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
@@ -165,6 +198,7 @@ class _Group:
     bones: np.ndarray  # global bone indices, in global order
     projectiles: bool
     ground: bool
+    debris: bool = False  # parts broken off a tree
     model: mujoco.MjModel | None = None
     data: mujoco.MjData | None = None
     body: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -178,6 +212,13 @@ class _Group:
     proj_body: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     proj_qpos: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     proj_dof: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    # structural damping: entries (row dof, column dof, address in d.M, rate)
+    # of each limb's block of the mass matrix, diagonal and below
+    damp_row: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    damp_col: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    damp_adr: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    damp_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    damp_below: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def _cat(trees: list[SimTree], get) -> np.ndarray:
@@ -187,9 +228,12 @@ def _cat(trees: list[SimTree], get) -> np.ndarray:
 class ReferenceSolver:
     """Simulate the active trees of a scene in MuJoCo, full 3D.
 
-    `timestep` (s) is rounded so that a frame is a whole number of force
-    intervals; `force_rate` (Hz; inf = every step) is how often loads and
-    damping are re-evaluated (and held between)."""
+    `timestep` (s, default DEFAULT_TIMESTEP; TIMESTEPS for the accuracy
+    report) is rounded so that a frame is a whole number of force
+    intervals; `force_rate` (Hz, default DEFAULT_FORCE_RATE; inf = every
+    step) is how often the loads are evaluated (damping is every step).
+    `quality` is the planar LOD's and only recorded: the rig's bones are
+    already merged by it (bone_length)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  log=None, timestep: float | None = None, force_rate: float | None = None):
@@ -230,14 +274,14 @@ class ReferenceSolver:
         self.strength = _cat(trees, lambda t: t.rig.strength)
         self.bone_tree = _cat(trees, lambda t: np.full(t.rig.n_bones, trees.index(t))).astype(int)
         self.parent = np.full(n, -1, dtype=np.int64)
-        self.frame = np.full(n, -1, dtype=np.int64)  # limb frame bone, -1 = world
+        self.limb = np.zeros(n, dtype=np.int64)  # limb of each bone, numbered across trees
+        limbs = 0
         for ti, t in enumerate(trees):
             o = int(self.offsets[ti])
             rig = t.rig
             self.parent[o:o + rig.n_bones] = np.where(rig.bone_parent >= 0, rig.bone_parent + o, -1)
-            limb_frame = np.asarray([limb.parent_bone for limb in rig.limbs], dtype=np.int64)
-            f = limb_frame[rig.bone_limb]
-            self.frame[o:o + rig.n_bones] = np.where(f >= 0, f + o, -1)
+            self.limb[o:o + rig.n_bones] = rig.bone_limb + limbs
+            limbs += len(rig.limbs)
         v = self.tip0 - self.pivot0
         length = np.linalg.norm(v, axis=1)
         self.length = length
@@ -275,6 +319,9 @@ class ReferenceSolver:
         self.k = np.repeat(k[:, None], 2, axis=1)
         self.cone = np.repeat(cone[:, None], 2, axis=1)
         self.springref = np.zeros((n, 2))
+        self.damped = np.ones((n, 2), dtype=bool)  # hinges the structural damping acts on
+        # damping rate per bone (1/s): alpha as an exact decay over a step
+        self.damp_rate = -np.expm1(-self.alpha * self.h) / self.h
         self.attached = np.ones(n, dtype=bool)  # the joint at the bone's base holds
         self.piece_root = np.full(n, -1, dtype=np.int64)  # first bone of a free part, -1
         self.breakable = np.isfinite(self.strength)
@@ -295,10 +342,10 @@ class ReferenceSolver:
         projectiles = bool(scene.projectiles)
         shared: list[int] = []
         if projectiles:
-            from ..pipeline import _projectile_reaches
+            from ..pipeline import projectile_reaches
 
             shared = [ti for ti, t in enumerate(self.trees)
-                      if _projectile_reaches(scene, t.rig.model)]
+                      if projectile_reaches(scene, t.rig.model)]
         self.groups: list[_Group] = []
         falls = bool(scene.projectiles) or any(t.cut is not None for t in self.trees)
         for ti in range(len(self.trees)):
@@ -311,19 +358,20 @@ class ReferenceSolver:
             bones = np.concatenate([np.arange(self.offsets[ti], self.offsets[ti + 1])
                                     for ti in shared] + [np.zeros(0, dtype=np.int64)])
             self.groups.append(_Group(shared, bones.astype(np.int64), True, scene.ground))
-        self.group_of_tree = np.zeros(len(self.trees), dtype=np.int64)
+        self.group_of_bone = np.zeros(self.n, dtype=np.int64)
+        self.debris_of: dict[int, int] = {}  # tree -> its debris group
         for gi, g in enumerate(self.groups):
-            self.group_of_tree[g.trees] = gi
+            self.group_of_bone[g.bones] = gi
         for g in self.groups:
             self._compile(g)
         if scene.prestress:
             for g in self.groups:
                 self._prestress(g)
-        self.stats.models = len(self.groups)
         self.stats.bodies = sum(g.model.nbody - 1 for g in self.groups)
 
-    def _compile(self, g: _Group) -> None:
-        """Build (or rebuild, carrying the state over) a group's model."""
+    def _compile(self, g: _Group, sources: list[_Group] | None = None) -> None:
+        """Build a group's model; with `sources` (the groups that held its
+        bones, kinematics and velocities current), carry the state over."""
         t0 = time.perf_counter()
         spec = mujoco.MjSpec()
         spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
@@ -375,7 +423,7 @@ class ReferenceSolver:
                           size=[max(float(self.radius[b]), 1e-4), 0, 0],
                           contype=1 if collide else 0, conaffinity=0, condim=6,
                           friction=[FRICTION, 0.005, ROLLING])
-            if g.ground and self.in_ground[b] and self._standing(b):
+            if g.ground and self.in_ground[b] and self.piece_root[b] < 0:
                 spec.add_exclude(bodyname1="world", bodyname2=f"b{b}")
             bodies[b] = body
         if g.projectiles:
@@ -383,6 +431,7 @@ class ReferenceSolver:
                 body = world.add_body(name=f"p{i}", pos=pr.position)
                 body.explicitinertial = True
                 body.mass = pr.mass
+                body.ipos = [0.0, 0.0, 0.0]
                 moment = pr.mass * pr.size**2 / 6 if pr.shape == "box" else \
                     0.4 * pr.mass * (pr.size / 2) ** 2
                 body.fullinertia = [moment, moment, moment, 0, 0, 0]
@@ -394,22 +443,12 @@ class ReferenceSolver:
                     friction=[pr.friction, 0.005, ROLLING],
                     solref=[max(PROJECTILE_TIMECONST, 2 * self.h),
                             restitution_damping(pr.restitution)])
-        model = spec.compile()
-        data = mujoco.MjData(model)
-        old = (g.model, g.data, g.body.copy(), g.hinge_qpos.copy(), g.hinge_dof.copy(),
-               g.free_qpos.copy(), g.free_dof.copy(), g.proj_qpos.copy(), g.proj_dof.copy())
-        g.model, g.data = model, data
+        g.model = spec.compile()
+        g.data = mujoco.MjData(g.model)
         self._index(g)
-        if old[0] is not None:
-            self._transfer(g, *old)
+        if sources:
+            self._transfer(g, sources)
         self.timing["compile_seconds"] += time.perf_counter() - t0
-
-    def _standing(self, b: int) -> bool:
-        """The bone's tree still stands on all its roots."""
-        ti = int(self.bone_tree[b])
-        sl = slice(int(self.offsets[ti]), int(self.offsets[ti + 1]))
-        roots = self.parent[sl] < 0
-        return bool(self.attached[sl][roots].all())
 
     def _index(self, g: _Group) -> None:
         """Body, joint, qpos and dof addresses of the group's bones."""
@@ -438,32 +477,64 @@ class ReferenceSolver:
             jnt = [m.joint(f"pf{i}").id for i in range(p)]
             g.proj_qpos = m.jnt_qposadr[jnt].astype(np.int64)
             g.proj_dof = m.jnt_dofadr[jnt].astype(np.int64)
+        self._damping_pairs(g)
 
-    def _transfer(self, g: _Group, model, data, body, hinge_qpos, hinge_dof, free_qpos,
-                  free_dof, proj_qpos, proj_dof) -> None:
-        """Carry the state of the old model (kinematics and velocities
-        current) over to the new one: hinges by value, newly freed bones
-        from their bodies' poses and velocities."""
+    def _damping_pairs(self, g: _Group) -> None:
+        """The entries of each limb's block of the mass matrix (M's sparse
+        lower triangle, rows and columns both hinge dofs of one limb): see
+        _damping."""
+        m = g.model
+        limb = np.full(m.nv, -1, dtype=np.int64)
+        rate = np.zeros(m.nv)
+        has = (g.hinge_dof >= 0) & self.damped[g.bones]
+        rows = np.nonzero(has)[0]
+        limb[g.hinge_dof[has]] = self.limb[g.bones[rows]]
+        rate[g.hinge_dof[has]] = self.damp_rate[g.bones[rows]]
+        nnz = m.M_rownnz
+        row = np.repeat(np.arange(m.nv), nnz)
+        first = np.cumsum(nnz) - nnz  # each row's first entry, counted densely
+        adr = np.repeat(m.M_rowadr, nnz) + np.arange(len(row)) - np.repeat(first, nnz)
+        col = m.M_colind[adr]
+        keep = (limb[row] >= 0) & (limb[row] == limb[col]) & (rate[row] > 0)
+        g.damp_row, g.damp_col, g.damp_adr = row[keep], col[keep], adr[keep]
+        g.damp_rate = rate[g.damp_row]
+        g.damp_below = g.damp_row != g.damp_col
+
+    def _transfer(self, g: _Group, sources: list[_Group]) -> None:
+        """Carry the state over to g's new model from the groups that held
+        its bones (their kinematics and velocities current): hinges by
+        value, newly freed bones from their bodies' poses and velocities,
+        projectiles by value."""
         d = g.data
-        d.time = data.time
-        keep = (g.hinge_qpos >= 0) & (hinge_qpos >= 0)
-        d.qpos[g.hinge_qpos[keep]] = data.qpos[hinge_qpos[keep]]
-        d.qvel[g.hinge_dof[keep]] = data.qvel[hinge_dof[keep]]
+        d.time = sources[0].data.time
         res = np.zeros(6)
-        for i in np.nonzero(g.free_qpos >= 0)[0]:
-            q, v = g.free_qpos[i], g.free_dof[i]
-            if free_qpos[i] >= 0:
-                d.qpos[q:q + 7] = data.qpos[free_qpos[i]:free_qpos[i] + 7]
-                d.qvel[v:v + 6] = data.qvel[free_dof[i]:free_dof[i] + 6]
-                continue
-            d.qpos[q:q + 3] = data.xpos[body[i]]
-            d.qpos[q + 3:q + 7] = data.xquat[body[i]]
-            mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, int(body[i]), res, 0)
-            d.qvel[v:v + 3] = res[3:]
-            d.qvel[v + 3:v + 6] = data.xmat[body[i]].reshape(3, 3).T @ res[:3]
-        for q_new, v_new, q_old, v_old in zip(g.proj_qpos, g.proj_dof, proj_qpos, proj_dof):
-            d.qpos[q_new:q_new + 7] = data.qpos[q_old:q_old + 7]
-            d.qvel[v_new:v_new + 6] = data.qvel[v_old:v_old + 6]
+        for src in sources:
+            data = src.data
+            dst = np.nonzero(np.isin(g.bones, src.bones))[0]
+            rows = np.searchsorted(src.bones, g.bones[dst])
+            q_new, v_new = g.hinge_qpos[dst], g.hinge_dof[dst]
+            q_old, v_old = src.hinge_qpos[rows], src.hinge_dof[rows]
+            keep = (q_new >= 0) & (q_old >= 0)
+            d.qpos[q_new[keep]] = data.qpos[q_old[keep]]
+            d.qvel[v_new[keep]] = data.qvel[v_old[keep]]
+            for i, r in zip(dst, rows):
+                q, v = g.free_qpos[i], g.free_dof[i]
+                if q < 0:
+                    continue
+                qo, vo, body = src.free_qpos[r], src.free_dof[r], int(src.body[r])
+                if qo >= 0:
+                    d.qpos[q:q + 7] = data.qpos[qo:qo + 7]
+                    d.qvel[v:v + 6] = data.qvel[vo:vo + 6]
+                    continue
+                d.qpos[q:q + 3] = data.xpos[body]
+                d.qpos[q + 3:q + 7] = data.xquat[body]
+                mujoco.mj_objectVelocity(src.model, data, XBODY, body, res, 0)
+                d.qvel[v:v + 3] = res[3:]  # the body frame origin's, world
+                d.qvel[v + 3:v + 6] = data.xmat[body].reshape(3, 3).T @ res[:3]  # local
+            if g.projectiles and src.projectiles:
+                for qn, vn, qo, vo in zip(g.proj_qpos, g.proj_dof, src.proj_qpos, src.proj_dof):
+                    d.qpos[qn:qn + 7] = data.qpos[qo:qo + 7]
+                    d.qvel[vn:vn + 6] = data.qvel[vo:vo + 6]
 
     def _prestress(self, g: _Group) -> None:
         """Spring references that make the rest pose the static equilibrium
@@ -491,7 +562,7 @@ class ReferenceSolver:
     def _read_group(self, g: _Group) -> None:
         d, b, rows = g.data, g.body, g.bones
         com = d.xipos[b]
-        cv = d.cvel[b]
+        cv = d.cvel[b]  # (rotation, translation) about the subtree COM of the root
         w = cv[:, :3]
         self.com[rows] = com
         self.omega[rows] = w
@@ -507,7 +578,7 @@ class ReferenceSolver:
         w = self.omega[:n] - self.omega[np.where(self.piece_root >= 0, self.piece_root, n)]
         spin = np.einsum("bi,bi->b", w, w)
         bad = ~(spin <= MAX_ANGULAR_SPEED**2) | ~np.isfinite(self.com[:n]).all(1)
-        warned = any(g.data.warning[w].number > 0 for g in self.groups for w in BAD)
+        warned = any(g.data.warning[kind].number > 0 for g in self.groups for kind in BAD)
         if not bad.any() and not warned:
             return
         bone = int(np.nonzero(bad)[0][0]) if bad.any() else 0
@@ -562,27 +633,25 @@ class ReferenceSolver:
             force[idx] *= (MAX_ACCELERATION / acc[idx])[:, None]
         return force
 
-    def _damping(self, wrench: np.ndarray) -> None:
-        """Add the mass-proportional structural damping to `wrench` (n + 1,
-        6: force, torque about the COM, world): on each bone's motion
-        relative to its frame bone, with the reaction on the frame bone."""
-        n = self.n
-        fi = self.frame_row
-        com, w = self.com[:n], self.omega[:n]
-        wf = self.omega[fi]
-        arm = com - self.com[fi]
-        w_rel = w - wf
-        v_rel = self.vcom[:n] - self.vcom[fi] - cross(wf, arm)
-        rot = self.rot
-        local = np.einsum("bji,bj->bi", rot, w_rel)
-        iw = np.einsum("bij,bj->bi", rot, np.einsum("bij,bj->bi", self.inertia, local))
-        own = np.empty((n, 6))
-        own[:, :3] = -self.damp_mass[:, None] * v_rel
-        own[:, 3:] = -self.damp[:, None] * iw
-        wrench[:n] += own
-        react = -own
-        react[:, 3:] -= cross(arm, own[:, :3])
-        np.add.at(wrench, fi, react)
+    def _damping(self, g: _Group) -> None:
+        """Structural damping as generalized forces (qfrc_applied): each
+        limb's joints get -rate M_LL qdot_L, M_LL the limb's block of the
+        mass matrix (its own bones and all they carry, at the current pose)
+        and qdot_L its own joint rates. This is the rig's mass-proportional
+        damping of every bone's motion relative to its limb's frame, with
+        what the limb carries moving with it (the planar LOD's lumped
+        bodies, and the Rayleigh quotient behind rig.alpha), so each limb's
+        fundamental gets the grammar's damping ratio; as joint torques it
+        acts with equal and opposite reaction on the frame bone and only
+        ever removes energy (M_LL is positive definite)."""
+        d = g.data
+        qv = d.qvel
+        w = d.M[g.damp_adr] * g.damp_rate
+        tau = np.bincount(g.damp_row, w * qv[g.damp_col], minlength=len(qv))
+        below = g.damp_below
+        tau += np.bincount(g.damp_col[below], w[below] * qv[g.damp_row[below]],
+                           minlength=len(qv))
+        np.negative(tau, out=d.qfrc_applied)
 
     # ------------------------------------------------------------------
     # events
@@ -603,14 +672,15 @@ class ReferenceSolver:
 
     def _events(self, t: float) -> list[_Group]:
         """Cuts, hinge snaps and breaks at time t; returns the groups whose
-        model was rebuilt (their state must be read again)."""
-        changed: set[int] = set()
+        model changed (their state must be read again)."""
+        freed: dict[int, list[int]] = {}  # group -> bones whose joint went
         for ti, tree in enumerate(self.trees):
             state = self.cut_state[ti]
             if not state or state == "falling":
                 continue
-            g = self.groups[self.group_of_tree[ti]]
             roots = self._roots(ti)
+            gi = int(self.group_of_bone[roots[0]])
+            g = self.groups[gi]
             rows = np.searchsorted(g.bones, roots)
             if state == "standing" and t >= tree.cut.time:
                 m, d = g.model, g.data
@@ -622,7 +692,8 @@ class ReferenceSolver:
                     m.jnt_limited[j] = 0
                     d.qvel[g.hinge_dof[r, 0]] += NUDGE
                     self.breakable[b] = False
-                    self._reframe(int(b))
+                    self.damped[b, 0] = False  # the hinge turns freely
+                self._damping_pairs(g)
                 self.cut_state[ti] = "hinged"
                 self.events.append((t, ti, "cut at the base"))
             elif state == "hinged":
@@ -631,7 +702,7 @@ class ReferenceSolver:
                     self.attached[roots] = False
                     self.cut_state[ti] = "falling"
                     self.events.append((t, ti, "hinge snapped"))
-                    changed.add(int(self.group_of_tree[ti]))
+                    freed.setdefault(gi, []).extend(int(b) for b in roots)
         for gi, g in enumerate(self.groups):
             cand = self.breakable[g.bones] & self.attached[g.bones]
             if not cand.any():
@@ -642,35 +713,85 @@ class ReferenceSolver:
                 b = int(g.bones[i])
                 self.attached[b] = False
                 self.breakable[b] = False
-                self._reframe(b)
                 ti, seg = int(self.bone_tree[b]), self.locate(b)[1]
                 why = (f"{self.paths[ti][seg]}: broke ({moment[i]:.0f} N m > strength "
                        f"{self.strength[b]:.0f} N m)")
                 self.events.append((t, ti, why))
                 self.stats.broken += 1
-                changed.add(gi)
+                freed.setdefault(gi, []).append(b)
         out = []
-        for gi in sorted(changed):
-            g = self.groups[gi]
-            self._compile(g)
-            self.stats.rebuilds += 1
+        if freed:
+            self._pieces()
+            count = sum(len(v) for v in freed.values())
+            self.log(f"t = {t:.3f} s: {count} joints went")
+        for gi in sorted(freed):
+            out.extend(self._detach(gi, freed[gi]))
+        for g in out:
             mujoco.mj_step1(g.model, g.data)
             self._read_group(g)
-            out.append(g)
         return out
+
+    def _detach(self, gi: int, freed: list[int]) -> list[_Group]:
+        """The joints at the base of `freed` bones of group gi are gone.
+        Parts broken off a standing tree move to the tree's debris model
+        (rebuilt with them; it is small), and their bodies in the tree's
+        model become massless, inert and frozen, so that a big tree is
+        never recompiled for a twig. A felled or uprooted tree, a part
+        breaking up further, or a scene with projectiles (which must reach
+        every part) rebuilds the group's own model. Returns the changed
+        groups."""
+        g = self.groups[gi]
+        if g.projectiles or g.debris or any(self.parent[b] < 0 for b in freed):
+            self._compile(g, [dataclasses.replace(g)])
+            self.stats.rebuilds += 1
+            return [g]
+        ti = g.trees[0]
+        parts = np.unique(np.concatenate([np.nonzero(self._outboard(b))[0] for b in freed]))
+        di = self.debris_of.get(ti)
+        sources = [dataclasses.replace(g)]
+        if di is None:
+            di = self.debris_of[ti] = len(self.groups)
+            self.groups.append(_Group([ti], parts, False, g.ground, debris=True))
+        else:
+            sources.append(dataclasses.replace(self.groups[di]))
+            self.groups[di].bones = np.union1d(self.groups[di].bones, parts)
+        debris = self.groups[di]
+        self._compile(debris, sources)
+        self._inert(g, parts)
+        self._index(g)
+        self.group_of_bone[parts] = di
+        self.stats.parts += len(freed)
+        return [g, debris]
+
+    def _inert(self, g: _Group, bones: np.ndarray) -> None:
+        """Bodies that left a model stay in it massless, frozen and without
+        springs, limits, contacts or loads (their dofs keep a unit armature
+        so that the mass matrix stays regular): the rest moves exactly as
+        if they had been removed."""
+        m, d = g.model, g.data
+        rows = np.searchsorted(g.bones, bones)
+        body = g.body[rows]
+        m.body_mass[body] = 0.0
+        m.body_inertia[body] = 0.0
+        dof = g.hinge_dof[rows][g.hinge_dof[rows] >= 0]
+        m.dof_armature[dof] = 1.0
+        d.qvel[dof] = 0.0
+        jnt = g.hinge_jnt[rows][g.hinge_jnt[rows] >= 0]
+        m.jnt_stiffness[jnt] = 0.0
+        m.jnt_limited[jnt] = 0
+        geom = m.body_geomadr[body]
+        m.geom_contype[geom] = 0
+        m.geom_conaffinity[geom] = 0
+        d.xfrc_applied[body] = 0.0
+        g.bones = np.setdiff1d(g.bones, bones)
 
     def _roots(self, ti: int) -> np.ndarray:
         sl = np.arange(self.offsets[ti], self.offsets[ti + 1])
         return sl[self.parent[sl] < 0]
 
-    def _reframe(self, bone: int) -> None:
-        """The joint at `bone`'s base is going: the bone and everything it
-        carries are damped relative to the bone (not the world, nor a frame
-        they no longer hang on), so their rigid motion is not damped."""
-        piece = self._outboard(bone)
-        outside = piece & ((self.frame < 0) | ~piece[np.maximum(self.frame, 0)])
-        self.frame[outside] = bone
-        self._update_decay()
+    def _pieces(self) -> None:
+        """The first bone of the free part each bone is in (-1: on a root
+        that still stands)."""
         for b in range(self.n):  # parents precede children
             p = self.parent[b]
             self.piece_root[b] = b if not self.attached[b] else \
@@ -684,14 +805,6 @@ class ReferenceSolver:
             if p >= 0 and out[p] and self.attached[b]:
                 out[b] = True
         return out
-
-    def _update_decay(self) -> None:
-        """Damping coefficient per bone as an exact decay over a force
-        interval (1/s); zero for a bone that is its own frame."""
-        decay = -np.expm1(-self.alpha * self.dt_force) / self.dt_force
-        self.damp = np.where(self.frame == np.arange(self.n), 0.0, decay)
-        self.damp_mass = self.damp * self.mass
-        self.frame_row = np.where(self.frame >= 0, self.frame, self.n)
 
     def _settle(self, t: float, dt: float) -> None:
         """A tree off its roots that has lain still for SETTLE_TIME is at rest."""
@@ -710,7 +823,11 @@ class ReferenceSolver:
     # running
 
     def run(self, progress=None) -> list[TreeMotion]:
-        """Simulate the scene; per active tree, the bones' motion at every frame."""
+        """Simulate the scene; per active tree, the bones' motion at every frame.
+
+        Each step: mj_step1 (kinematics), then, at force updates, read the
+        bones, record a frame, handle events and write the held loads
+        (xfrc_applied); every step the damping (qfrc_applied); mj_step2."""
         scene = self.scene
         frames = scene.frame_count
         n = self.n
@@ -718,21 +835,20 @@ class ReferenceSolver:
         pivots = np.zeros((frames, n, 3))
         self.com, self.vcom, self.omega = (np.zeros((n + 1, 3)) for _ in range(3))
         self.rot = np.zeros((n, 3, 3))
-        self._update_decay()
         proj = next((g for g in self.groups if g.projectiles), None)
         n_proj = len(scene.projectiles) if proj is not None else 0
         self.track_pos = np.zeros((frames, n_proj, 3))
         self.track_quat = np.zeros((frames, n_proj, 4))
         launched = np.zeros(n_proj, dtype=bool)
         damped = bool((self.alpha > 0).any())
-        wrench = np.zeros((n + 1, 6))
         steps = (frames - 1) * self.spf
         for step in range(steps + 1):
             t = step * self.h
             t0 = time.perf_counter()
             if n_proj and not launched.all():
                 self._projectiles(proj, t, launched)
-            if step % self.force_every:
+            update = step % self.force_every == 0
+            if not update and not damped:
                 for g in self.groups:
                     mujoco.mj_step(g.model, g.data)
                 self.timing["step_seconds"] += time.perf_counter() - t0
@@ -741,31 +857,32 @@ class ReferenceSolver:
             for g in self.groups:
                 mujoco.mj_step1(g.model, g.data)
             t1 = time.perf_counter()
-            self._read()
-            self._check(t)
-            if step % self.spf == 0:
-                f = step // self.spf
-                self._record(f, quats, pivots)
-                if proj is not None:
-                    self.track_pos[f] = proj.data.xpos[proj.proj_body]
-                    self.track_quat[f] = proj.data.xquat[proj.proj_body][:, [1, 2, 3, 0]]
-                if f > 0:
-                    self._settle(t, 1.0 / scene.fps)
-                    if progress is not None:
-                        progress(f, frames - 1)
-                if step == steps:
-                    break
-            if self._events(t):
+            if update:
+                self._read()
                 self._check(t)
-            if self.stats.rebuilds:
-                self._clamp_spin()
-            wrench[:] = 0.0
-            wrench[:n, :3] = self._external(t)
+                if step % self.spf == 0:
+                    f = step // self.spf
+                    self._record(f, quats, pivots)
+                    if proj is not None:
+                        self.track_pos[f] = proj.data.xpos[proj.proj_body]
+                        self.track_quat[f] = proj.data.xquat[proj.proj_body][:, [1, 2, 3, 0]]
+                    if f > 0:
+                        self._settle(t, 1.0 / scene.fps)
+                        if progress is not None:
+                            progress(f, frames - 1)
+                    if step == steps:
+                        break
+                if self._events(t):
+                    self._check(t)
+                if not self.attached.all():
+                    self._clamp_spin()
+                force = self._external(t)
+                for g in self.groups:
+                    g.data.xfrc_applied[g.body, :3] = force[g.bones]
+                self.stats.updates += 1
             if damped:
-                self._damping(wrench)
-            for g in self.groups:
-                g.data.xfrc_applied[g.body] = wrench[g.bones]
-            self.stats.updates += 1
+                for g in self.groups:
+                    self._damping(g)
             t2 = time.perf_counter()
             for g in self.groups:
                 mujoco.mj_step2(g.model, g.data)
@@ -838,8 +955,9 @@ class ReferenceSolver:
         if st.clamped:
             notes.append(f"free parts' spin clamped at {MAX_SPIN:.0f} rad/s on {st.clamped} "
                          "body updates")
-        stats = {"steps": st.steps, "updates": st.updates, "models": st.models,
+        stats = {"steps": st.steps, "updates": st.updates, "models": len(self.groups),
                  "bodies": st.bodies, "bones": self.n, "rebuilds": st.rebuilds,
-                 "limited": st.limited, "broken": st.broken, "clamped": st.clamped}
+                 "parts": st.parts, "limited": st.limited, "broken": st.broken,
+                 "clamped": st.clamped}
         return {"substep": self.h, "force_interval": self.dt_force,
                 "integrator": "discrete", "stats": stats, "notes": notes}
