@@ -178,7 +178,7 @@ def run_case(species: str, scenario: str, duration: float, lod: dict[str, Qualit
         bake, cpu = _timed(scene, quality=q)
         key = (q.planes, q.bone_length, q.coupling, q.iterations)
         if key not in fine_cache:
-            fine = replace(q, substep_rate=q.substep_rate * 4, force_rate=q.substep_rate * 4,
+            fine = replace(q, substep_rate=q.substep_rate * 4, force_rate=q.force_rate * 4,
                            iterations=max(q.iterations, 20))
             fine_cache[key] = bake_scene(scene, quality=fine)
         model_rms = errors(fine_cache[key], truth)[0]
@@ -280,11 +280,11 @@ def plot(summary: list[dict], path: Path) -> Path | None:
 
 
 def accuracy(out: str | Path = "out/accuracy", species: list[str] | None = None,
-             scenarios: list[str] | None = None, duration: float = 6.0,
+             scenarios: list[str] | None = None, duration: float = 5.0,
              lod: dict[str, Quality] | None = None, reference: dict[str, float] | None = None,
              log=None) -> dict:
     """Run every case and write the report; returns its JSON content."""
-    species = species or ["sapling", "palm", "broadleaf", "conifer"]
+    species = species or ["sapling", "broadleaf", "conifer"]
     scenarios = scenarios or list(SCENARIOS)
     lod = LOD_SETTINGS if lod is None else lod
     reference = REFERENCE_STEPS if reference is None else reference

@@ -399,6 +399,27 @@ def cmd_accuracy(args) -> int:
     return 0
 
 
+def cmd_stability(args) -> int:
+    from .stress import cases, stability
+
+    names = {c.name for c in cases(True)}
+    for n in args.case or []:
+        if n not in names:
+            raise InputError(f"unknown case {n!r} (choose from {', '.join(sorted(names))})")
+    solvers = ("planar", "full") if args.solver == "both" else (args.solver,)
+    log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
+    results = stability(args.out, long=not args.quick, solvers=solvers, only=args.case, log=log)
+    failed = [r for r in results if not r.passed]
+    if args.json:
+        from dataclasses import asdict
+
+        print(json.dumps([asdict(r) for r in results], default=str))
+    else:
+        print(f"{len(results) - len(failed)} of {len(results)} passed; "
+              f"written {Path(args.out) / 'report.md'}, report.json")
+    return 1 if failed else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="treebake",
@@ -527,13 +548,28 @@ def build_parser() -> argparse.ArgumentParser:
                                    "reference at coarser steps; write OUT/report.md, "
                                    "report.json and plot.png (error against cost).")
     p.add_argument("--out", default="out/accuracy", help="output folder (default: out/accuracy)")
-    p.add_argument("--species", nargs="*", help="species (default: sapling palm broadleaf "
-                                                "conifer)")
+    p.add_argument("--species", nargs="*", help="species (default: sapling broadleaf conifer)")
     p.add_argument("--scenarios", nargs="*", help="scenarios (default: all)")
-    p.add_argument("--duration", type=float, default=6.0, help="seconds per case (default 6)")
+    p.add_argument("--duration", type=float, default=5.0, help="seconds per case (default 5)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_accuracy)
+
+    p = sub.add_parser("stability", help="stress suite: stiff, extreme and long cases, both "
+                                          "solvers",
+                       description="Run the stress cases (stiffness to x10^4, mass ratios to "
+                                   "1:10^4, cones 0.5-90 deg, overlapping and near-zero "
+                                   "segments, wind to 70 m/s, huge blasts, 10-minute runs) on "
+                                   "both solvers; write OUT/report.md and report.json. Exit 1 "
+                                   "if a case fails.")
+    p.add_argument("--out", default="out/stability", help="output folder (default: "
+                                                          "out/stability)")
+    p.add_argument("--quick", action="store_true", help="leave out the 10-minute runs")
+    p.add_argument("--solver", choices=("planar", "full", "both"), default="both")
+    p.add_argument("--case", nargs="*", help="only these cases")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_stability)
 
     return parser
 

@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..rig import Rig
+from .loads import BoneProps
 
-MAX_ANGULAR_SPEED = 200.0  # rad/s: beyond this a bone is taken to be unstable
+MAX_ANGULAR_SPEED = 500.0  # rad/s: beyond this a bone is taken to be unstable
 MAX_ACCELERATION = 2000.0  # m/s^2: external loads on a bone are capped here (reported)
 
 
@@ -33,3 +34,83 @@ class TreeMotion:
     quaternions: np.ndarray
     pivots: np.ndarray
     events: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Pull:
+    """A rope pull (scene PullSpec) on a global bone."""
+
+    bone: int
+    force: np.ndarray  # N, world
+    ramp: float  # s
+    release: float  # s
+
+
+@dataclass
+class Bones:
+    """The active trees' rigs as global bone arrays (trees in order): what
+    every solver starts from."""
+
+    offsets: np.ndarray  # (trees + 1,) first bone of each tree
+    pivot0: np.ndarray  # (B, 3) m, rest
+    tip0: np.ndarray
+    com0: np.ndarray
+    mass: np.ndarray  # kg
+    inertia: np.ndarray  # (B, 3, 3) kg m^2
+    k: np.ndarray  # N m/rad
+    alpha: np.ndarray  # 1/s
+    cone: np.ndarray  # rad
+    strength: np.ndarray  # N m
+    radius: np.ndarray  # m
+    bone_tree: np.ndarray  # (B,) tree index
+    parent: np.ndarray  # (B,) global parent bone, -1 = ground
+    length: np.ndarray  # m
+    props: BoneProps
+    pulls: list[Pull]
+
+    @classmethod
+    def of(cls, trees: list[SimTree]) -> Bones:
+        def cat(get) -> np.ndarray:
+            return np.concatenate([np.asarray(get(t)) for t in trees]) if trees else np.zeros(0)
+
+        offsets = np.cumsum([0] + [t.rig.n_bones for t in trees])
+        n = int(offsets[-1])
+        pivot0 = cat(lambda t: t.rig.pivot).reshape(n, 3)
+        tip0 = cat(lambda t: t.rig.tip).reshape(n, 3)
+        mass = cat(lambda t: t.rig.mass)
+        radius = cat(lambda t: t.rig.radius)
+        parent = np.full(n, -1, dtype=np.int64)
+        pulls = []
+        for ti, t in enumerate(trees):
+            o = int(offsets[ti])
+            parent[o:o + t.rig.n_bones] = np.where(t.rig.bone_parent >= 0,
+                                                   t.rig.bone_parent + o, -1)
+            for pull in t.pulls:
+                pulls.append(Pull(t.rig.stem_bone_at(pull.at) + o,
+                                  np.asarray(pull.force, dtype=float), pull.ramp, pull.release))
+        props = BoneProps(
+            mass=mass, wood_area=cat(lambda t: t.rig.wood_area),
+            leaf_area=cat(lambda t: t.rig.leaf_area), diameter=2 * radius,
+            cd_wood=cat(lambda t: np.full(t.rig.n_bones, t.rig.drag)),
+            cd_leaf=cat(lambda t: np.full(t.rig.n_bones, t.rig.leaf_drag)))
+        return cls(offsets, pivot0, tip0, cat(lambda t: t.rig.com).reshape(n, 3), mass,
+                   cat(lambda t: t.rig.inertia).reshape(n, 3, 3), cat(lambda t: t.rig.k),
+                   cat(lambda t: t.rig.alpha), cat(lambda t: t.rig.cone),
+                   cat(lambda t: t.rig.strength), radius,
+                   np.repeat(np.arange(len(trees)), [t.rig.n_bones for t in trees]),
+                   parent, np.linalg.norm(tip0 - pivot0, axis=1), props, pulls)
+
+    @property
+    def n(self) -> int:
+        return int(self.offsets[-1])
+
+    def pull_forces(self, t: float) -> np.ndarray | None:
+        """World force (N) of the pulls acting at time t on each bone: rising
+        linearly over `ramp`, held, gone at `release`; None if none acts."""
+        active = [p for p in self.pulls if t < p.release]
+        if not active:
+            return None
+        out = np.zeros((self.n, 3))
+        for p in active:
+            out[p.bone] += p.force * (min(1.0, t / p.ramp) if p.ramp > 0 else 1.0)
+        return out

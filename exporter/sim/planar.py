@@ -45,7 +45,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import pymunk
@@ -61,7 +61,7 @@ from ..rotations import (
     quaternions_from_matrices,
 )
 from ..scene import Quality, Scene
-from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, SimTree, TreeMotion
+from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, Bones, SimTree, TreeMotion
 from .contact import effective_mass, ground_forces
 from .debris import SLEEP_TIME, Debris
 from .loads import BoneProps, SceneLoads
@@ -126,10 +126,6 @@ def apparent_mass(r: float, zeta: float) -> float:
     return float(np.clip((q + z) / (q * q + z), 1.0, 3.0))
 
 
-def _cat(trees: list[SimTree], get) -> np.ndarray:
-    return np.concatenate([np.asarray(get(t)) for t in trees]) if trees else np.zeros(0)
-
-
 class PlanarSolver:
     """Simulate the active trees of one scene with the planar LOD."""
 
@@ -151,36 +147,17 @@ class PlanarSolver:
         self._lumping()
         self._levels()
         self._space()
-        self._pulls()
 
     # ------------------------------------------------------------------
     # construction
 
     def _collect(self) -> None:
-        """Concatenate the trees' rigs into global bone arrays."""
-        trees = self.trees
-        self.offsets = np.cumsum([0] + [t.rig.n_bones for t in trees])
-        n = self.n = int(self.offsets[-1])
-        self.pivot0 = _cat(trees, lambda t: t.rig.pivot).reshape(n, 3)
-        self.tip0 = _cat(trees, lambda t: t.rig.tip).reshape(n, 3)
-        self.com0 = _cat(trees, lambda t: t.rig.com).reshape(n, 3)
-        self.mass = _cat(trees, lambda t: t.rig.mass)
-        self.inertia = _cat(trees, lambda t: t.rig.inertia).reshape(n, 3, 3)
-        self.k = _cat(trees, lambda t: t.rig.k)
-        self.alpha = _cat(trees, lambda t: t.rig.alpha)
-        self.cone = _cat(trees, lambda t: t.rig.cone)
-        self.strength = _cat(trees, lambda t: t.rig.strength)
-        self.radius = _cat(trees, lambda t: t.rig.radius)
-        self.bone_tree = _cat(trees, lambda t: np.full(t.rig.n_bones, trees.index(t))).astype(int)
-        self.parent = _cat(trees, lambda t: np.where(
-            t.rig.bone_parent >= 0, t.rig.bone_parent + self.offsets[trees.index(t)], -1)).astype(int)
-        self.length = np.linalg.norm(self.tip0 - self.pivot0, axis=1)
-        self.props = BoneProps(
-            mass=self.mass, wood_area=_cat(trees, lambda t: t.rig.wood_area),
-            leaf_area=_cat(trees, lambda t: t.rig.leaf_area), diameter=2 * self.radius,
-            cd_wood=_cat(trees, lambda t: np.full(t.rig.n_bones, t.rig.drag)),
-            cd_leaf=_cat(trees, lambda t: np.full(t.rig.n_bones, t.rig.leaf_drag)))
-        self.stats.bones = n
+        """The trees' rigs as global bone arrays (sim/common.py's Bones)."""
+        self.bones = Bones.of(self.trees)
+        for f in fields(Bones):  # as attributes: the solver reads them everywhere
+            setattr(self, f.name, getattr(self.bones, f.name))
+        self.n = self.bones.n
+        self.stats.bones = self.n
 
     def _chains(self) -> None:
         """Each rig limb is a chain with one or two bending planes."""
@@ -455,15 +432,6 @@ class PlanarSolver:
         self.write_buf = batch.Buffer()
         self.write_buf.set_float_buf(self.force_rows)
 
-    def _pulls(self) -> None:
-        """Rope pulls: each acts on the main-stem bone at `at` x its height."""
-        self.pull_list = []
-        for ti, t in enumerate(self.trees):
-            for pull in t.pulls:
-                bone = t.rig.stem_bone_at(pull.at) + int(self.offsets[ti])
-                self.pull_list.append((bone, np.asarray(pull.force, dtype=float), pull.ramp,
-                                       pull.release))
-
     # ------------------------------------------------------------------
     # state
 
@@ -553,16 +521,6 @@ class PlanarSolver:
     # ------------------------------------------------------------------
     # loads
 
-    def pull_forces(self, t: float) -> np.ndarray | None:
-        """World force (N) of the pulls acting at time t on each bone, or None."""
-        active = [(b, f, ramp) for b, f, ramp, release in self.pull_list if t < release]
-        if not active:
-            return None
-        out = np.zeros((self.n, 3))
-        for b, f, ramp in active:
-            out[b] += f * (min(1.0, t / ramp) if ramp > 0 else 1.0)
-        return out
-
     def forces(self, t: float, pose: dict, prev: dict | None, since: float, dt: float) -> None:
         """Evaluate all loads at time t and write them into the force buffer,
         to be held for the next `dt` s; `prev` is the pose `since` s ago.
@@ -572,7 +530,7 @@ class PlanarSolver:
         axis = apply(rot, self.tip0 - self.pivot0)
         axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
         force = self.loads.forces(t, com, pose["vcom"], axis, self.props, dt=dt)
-        pulls = self.pull_forces(t)
+        pulls = self.bones.pull_forces(t)
         if pulls is not None:
             force += pulls
         limited = self.stats.limited

@@ -111,7 +111,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import mujoco
 import numpy as np
@@ -120,10 +120,10 @@ from ..bake import ObjectsBake
 from ..errors import SimulationError
 from ..rotations import cross
 from ..scene import Quality, Scene
-from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, SimTree, TreeMotion
+from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, Bones, SimTree, TreeMotion
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
-from .loads import BoneProps, SceneLoads
+from .loads import SceneLoads
 
 DEFAULT_TIMESTEP = 1 / 2000  # s
 DEFAULT_FORCE_RATE = 500.0  # Hz
@@ -221,10 +221,6 @@ class _Group:
     damp_below: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
-def _cat(trees: list[SimTree], get) -> np.ndarray:
-    return np.concatenate([np.asarray(get(t)) for t in trees]) if trees else np.zeros(0)
-
-
 class ReferenceSolver:
     """Simulate the active trees of a scene in MuJoCo, full 3D.
 
@@ -260,44 +256,21 @@ class ReferenceSolver:
     # construction
 
     def _collect(self) -> None:
-        """The trees' rigs as global bone arrays (trees in order)."""
+        """The trees' rigs as global bone arrays (sim/common.py's Bones)."""
         trees = self.trees
-        self.offsets = np.cumsum([0] + [t.rig.n_bones for t in trees])
-        n = self.n = int(self.offsets[-1])
-        self.pivot0 = _cat(trees, lambda t: t.rig.pivot).reshape(n, 3)
-        self.tip0 = _cat(trees, lambda t: t.rig.tip).reshape(n, 3)
-        self.com0 = _cat(trees, lambda t: t.rig.com).reshape(n, 3)
-        self.mass = _cat(trees, lambda t: t.rig.mass)
-        self.inertia = _cat(trees, lambda t: t.rig.inertia).reshape(n, 3, 3)
-        self.radius = _cat(trees, lambda t: t.rig.radius)
-        self.alpha = _cat(trees, lambda t: t.rig.alpha)
-        self.strength = _cat(trees, lambda t: t.rig.strength)
-        self.bone_tree = _cat(trees, lambda t: np.full(t.rig.n_bones, trees.index(t))).astype(int)
-        self.parent = np.full(n, -1, dtype=np.int64)
+        self.bones = Bones.of(trees)
+        for f in fields(Bones):
+            setattr(self, f.name, getattr(self.bones, f.name))
+        n = self.n = self.bones.n
         self.limb = np.zeros(n, dtype=np.int64)  # limb of each bone, numbered across trees
         limbs = 0
         for ti, t in enumerate(trees):
             o = int(self.offsets[ti])
-            rig = t.rig
-            self.parent[o:o + rig.n_bones] = np.where(rig.bone_parent >= 0, rig.bone_parent + o, -1)
-            self.limb[o:o + rig.n_bones] = rig.bone_limb + limbs
-            limbs += len(rig.limbs)
+            self.limb[o:o + t.rig.n_bones] = t.rig.bone_limb + limbs
+            limbs += len(t.rig.limbs)
         v = self.tip0 - self.pivot0
-        length = np.linalg.norm(v, axis=1)
-        self.length = length
-        self.axis0 = np.divide(v, length[:, None], out=np.tile([0.0, 0.0, 1.0], (n, 1)),
-                               where=length[:, None] > 0)
-        self.props = BoneProps(
-            mass=self.mass, wood_area=_cat(trees, lambda t: t.rig.wood_area),
-            leaf_area=_cat(trees, lambda t: t.rig.leaf_area), diameter=2 * self.radius,
-            cd_wood=_cat(trees, lambda t: np.full(t.rig.n_bones, t.rig.drag)),
-            cd_leaf=_cat(trees, lambda t: np.full(t.rig.n_bones, t.rig.leaf_drag)))
-        self.pulls = []
-        for ti, t in enumerate(trees):
-            for pull in t.pulls:
-                bone = t.rig.stem_bone_at(pull.at) + int(self.offsets[ti])
-                self.pulls.append((bone, np.asarray(pull.force, dtype=float), pull.ramp,
-                                   pull.release))
+        self.axis0 = np.divide(v, self.length[:, None], out=np.tile([0.0, 0.0, 1.0], (n, 1)),
+                               where=self.length[:, None] > 0)
         self.paths = [t.rig.model.segment_paths() for t in trees]
 
     def _joints(self) -> None:
@@ -314,10 +287,8 @@ class ReferenceSolver:
                                                                        0.0])
         for b in range(n):
             self.hinge_axis[b] = hinge_axes(self.axis0[b], toward[b])
-        k = _cat(self.trees, lambda t: t.rig.k)
-        cone = _cat(self.trees, lambda t: t.rig.cone)
-        self.k = np.repeat(k[:, None], 2, axis=1)
-        self.cone = np.repeat(cone[:, None], 2, axis=1)
+        self.k = np.repeat(self.bones.k[:, None], 2, axis=1)  # per hinge
+        self.cone = np.repeat(self.bones.cone[:, None], 2, axis=1)
         self.springref = np.zeros((n, 2))
         self.damped = np.ones((n, 2), dtype=bool)  # hinges the structural damping acts on
         # damping rate per bone (1/s): alpha as an exact decay over a step
@@ -329,7 +300,8 @@ class ReferenceSolver:
         self.still_time = np.zeros(len(self.trees))
         self.settled = np.zeros(len(self.trees), dtype=bool)
         # bones whose rest capsule reaches into the ground do not touch it while standing
-        ratio = _cat(self.trees, lambda t: np.full(t.rig.n_bones, t.rig.options.bone_ratio))
+        ratio = np.repeat([t.rig.options.bone_ratio for t in self.trees],
+                          [t.rig.n_bones for t in self.trees])
         mid = 0.5 * (self.pivot0 + self.tip0)
         half = (0.5 * ratio * self.length)[:, None] * self.axis0
         low = np.minimum((mid - half)[:, 2], (mid + half)[:, 2]) - self.radius
@@ -602,16 +574,6 @@ class ReferenceSolver:
                 g.data.qvel[v:v + 3] *= MAX_SPIN / np.linalg.norm(g.data.qvel[v:v + 3])
                 self.stats.clamped += 1
 
-    def pull_forces(self, t: float) -> np.ndarray | None:
-        """World force (N) of the pulls acting at time t on each bone, or None."""
-        active = [(b, f, ramp) for b, f, ramp, release in self.pulls if t < release]
-        if not active:
-            return None
-        out = np.zeros((self.n, 3))
-        for b, f, ramp in active:
-            out[b] += f * (min(1.0, t / ramp) if ramp > 0 else 1.0)
-        return out
-
     def _external(self, t: float) -> np.ndarray:
         """Air, blasts, attractors and pulls (N, world, at the COMs), capped
         at MAX_ACCELERATION x mass; gravity is MuJoCo's."""
@@ -619,7 +581,7 @@ class ReferenceSolver:
         axis = np.einsum("bij,bj->bi", self.rot, self.axis0)
         force = self.loads.forces(t, self.com[:n], self.vcom[:n], axis, self.props,
                                   include_gravity=False, dt=self.dt_force)
-        pulls = self.pull_forces(t)
+        pulls = self.bones.pull_forces(t)
         if pulls is not None:
             force += pulls
         acc = np.linalg.norm(force, axis=1) / np.maximum(self.mass, 1e-9)
