@@ -234,12 +234,14 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         meta["force_interval"] = min(c.dt_update for c in chunks)
         meta["chunks"] = len(chunks)
         meta["stats"] = {k: v for k, v in asdict(st).items()
-                         if k not in ("notes", "step_seconds", "update_seconds", "first_limit")}
+                         if k not in ("notes", "step_seconds", "update_seconds", "first_limit",
+                                      "frame_seconds")}
         meta["stats"]["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
         meta["notes"] = _planar_notes(st, q, meta["substep"])
         timing.update(step_seconds=round(st.step_seconds, 3),
                       update_seconds=round(st.update_seconds, 3),
-                      segment_steps=sum(c.segments * c.stats.substeps for c in chunks))
+                      segment_steps=sum(c.segments * c.stats.substeps for c in chunks),
+                      **frame_timing(st.frame_seconds, round(1.0 / (scene.fps * meta["substep"]))))
         for c in chunks:
             if c.objects is not None:
                 objects = ObjectsBake(*c.objects)
@@ -251,6 +253,11 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             motions[tree.name] = motion
         meta.update(ref.meta())
         timing.update({k: round(v, 3) for k, v in ref.timing.items()})
+        steps = np.asarray(ref.step_times)
+        if len(steps):
+            per_frame = steps[: len(steps) // ref.spf * ref.spf].reshape(-1, ref.spf).sum(1)
+            timing.update(segment_steps=sum(t.rig.model.n_segments for t in active) * len(steps),
+                          **frame_timing(per_frame, ref.spf))
         objects = ref.objects()
     for note in meta.get("notes", []):
         log(note)
@@ -270,6 +277,18 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         trees.append(tree_bake_from_model(g.model, pos, rot, info))
     timing["wall_seconds"] = round(time.perf_counter() - started, 3)
     return Bake(np.arange(frames) / scene.fps, trees, meta, objects, timing)
+
+
+def frame_timing(frame_seconds, substeps_per_frame: int) -> dict:
+    """Physics time per frame (mean, p95) and per substep of the finest
+    level (the frame's time over its substeps), ms."""
+    f = np.asarray(frame_seconds, dtype=float)
+    if not len(f):
+        return {}
+    mean, p95 = float(f.mean()), float(np.percentile(f, 95))
+    return {"frame_mean_ms": round(1e3 * mean, 4), "frame_p95_ms": round(1e3 * p95, 4),
+            "substep_mean_ms": round(1e3 * mean / substeps_per_frame, 5),
+            "substep_p95_ms": round(1e3 * p95 / substeps_per_frame, 5)}
 
 
 def _relative(path: Path, scene_file: str) -> str:

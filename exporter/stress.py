@@ -197,15 +197,15 @@ def run(case: Case, solver: str) -> Result:
 
 def report_markdown(results: list[Result]) -> str:
     lines = ["# Stability: stress cases over both solvers", "",
-             f"Pass: finite, kinetic energy never grows by more than "
+             (f"Pass: finite, kinetic energy never grows by more than "
              f"{ENERGY_TOLERANCE:.0%} from one 1 s window to the next once the forcing stops, "
              f"joint gaps under {GAP_TOLERANCE:.0%} of bone length. The planar LOD's rule: "
              "rotary inertia I >= 2 k_max (h/s)^2 (omega h <= s at every joint), spring "
              "damping k h/2, mass-proportional damping as an exact decay, loads capped at "
              "2000 m/s^2 per bone, steps split in 8 during impulsive loads and fast spins "
-             "(docs/physics.md).", "",
-             "| case | solver | pass | energy growth | max gap | max spin rad/s | "
-             "rest after s | wall s | what | adapted |",
+             "(docs/physics.md)."), "",
+             ("| case | solver | pass | energy growth | max gap | max spin rad/s | "
+             "rest after s | wall s | what | adapted |"),
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         rest = "-" if math.isinf(r.rest) else f"{r.rest:.1f}"

@@ -75,6 +75,7 @@ REFINE_SPIN = 0.015  # rad: ... or while a body turns this much in a substep
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
 FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
 SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
+STILL_SPEED = 0.005  # m/s and rad/s: the same for a standing tree no load reaches any more
 
 
 @dataclass
@@ -97,6 +98,7 @@ class Stats:
     debris: int = 0
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
     notes: list[str] = field(default_factory=list)
+    frame_seconds: list[float] = field(default_factory=list)  # physics time of each frame
 
 
 def plane_direction(d: np.ndarray, load: np.ndarray | None) -> np.ndarray:
@@ -839,24 +841,35 @@ class PlanarSolver:
             body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
             body.position = origin
 
-    def settle_fallen(self, t: float, pose: dict, dt: float) -> None:
-        """A tree whose stem is off its root (felled, uprooted) and that has
-        lain still for SLEEP_TIME becomes one sleeping rigid body: lying on
-        the ground it would otherwise keep the solver at contact rate."""
+    def settle(self, t: float, pose: dict, dt: float) -> None:
+        """Put trees at rest to sleep, as one sleeping rigid body each: a
+        fallen tree (stem off its root) slower than SETTLE_SPEED for
+        SLEEP_TIME (lying on the ground it would keep the solver at contact
+        rate), and a standing one slower than STILL_SPEED once no load that
+        changes will reach it again (after a blast, a pull, a passing gust
+        front)."""
         for ti in range(len(self.trees)):
             bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
-            roots = bones[self.parent[bones] < 0]
             awake = bones[~self.in_debris[bones]]
-            if self.joint_alive[roots].any() or not len(awake):
+            if not len(awake):
+                continue
+            roots = bones[self.parent[bones] < 0]
+            fallen = not self.joint_alive[roots].any()
+            if fallen:
+                limit = SETTLE_SPEED
+            elif t >= self.quiet[ti] and self.trees[ti].cut is None:
+                limit = STILL_SPEED
+            else:
                 self.still_time[ti] = 0.0
                 continue
             speed = max(np.abs(pose["vcom"][awake]).max(), np.abs(pose["omega"][awake]).max())
-            self.still_time[ti] = self.still_time[ti] + dt if speed < SETTLE_SPEED else 0.0
+            self.still_time[ti] = self.still_time[ti] + dt if speed < limit else 0.0
             if self.still_time[ti] > SLEEP_TIME:
                 freed = np.zeros(self.n, dtype=bool)
                 freed[awake] = True
                 self._to_debris(freed, pose, asleep=True)
-                self.events.append((t, self.trees[ti].name, "came to rest on the ground"))
+                what = "came to rest on the ground" if fallen else "at rest: asleep"
+                self.events.append((t, self.trees[ti].name, what))
 
     def _nudge(self, root: int, w: float) -> None:
         """Turn a root chain (plane 0) as one rigid body about its pivot at
@@ -979,6 +992,7 @@ class PlanarSolver:
         self.breakable = np.isfinite(self.strength[self.body_bone])
         self.pivot_alive = np.ones(len(self.bodies), dtype=bool)
         self.still_time = np.zeros(len(self.trees))
+        self.quiet = self._quiet_times()
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
                              self.radius, scene.ground)
         self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
@@ -993,6 +1007,7 @@ class PlanarSolver:
         self.contact_active = False
         self.refine = 1
         for f in range(1, frames):
+            t_frame = time.perf_counter()
             for _ in range(self.spf):
                 if substep >= next_update:
                     t0 = time.perf_counter()
@@ -1041,9 +1056,9 @@ class PlanarSolver:
             pivots[f] = pose_frame["pivot"]
             if self.projectiles is not None:
                 self.projectiles.record(f)
-            if self.felled:
-                self.settle_fallen(t, pose_frame, 1.0 / scene.fps)
+            self.settle(t, pose_frame, 1.0 / scene.fps)
             self.stats.update_seconds += time.perf_counter() - t0
+            self.stats.frame_seconds.append(time.perf_counter() - t_frame)
             if progress is not None:
                 progress(f, frames - 1)
         self.stats.substeps = substep
@@ -1056,11 +1071,19 @@ class PlanarSolver:
             out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
         return out
 
-    @property
-    def felled(self) -> bool:
-        """Some tree's stem is off its root (cut or uprooted)."""
-        roots = self.parent < 0
-        return bool((roots & ~self.joint_alive & ~self.in_debris).any())
+    def _quiet_times(self) -> np.ndarray:
+        """Per tree, the time (s) after which no changing load reaches it
+        (inf: wind, projectiles in the scene, pulls until their release)."""
+        out = np.zeros(len(self.trees))
+        for ti, tree in enumerate(self.trees):
+            m = tree.rig.model
+            lo, hi = m.bounds()
+            quiet = self.loads.quiet_after(0.5 * (lo + hi), 0.5 * float(np.linalg.norm(
+                hi[:2] - lo[:2])), float(hi[2]))
+            for p in tree.pulls:
+                quiet = max(quiet, p.release)
+            out[ti] = math.inf if self.scene.projectiles else quiet
+        return out
 
     @property
     def cut_list(self) -> bool:

@@ -804,6 +804,7 @@ class ReferenceSolver:
         launched = np.zeros(n_proj, dtype=bool)
         damped = bool((self.alpha > 0).any())
         steps = (frames - 1) * self.spf
+        self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
         for step in range(steps + 1):
             t = step * self.h
             t0 = time.perf_counter()
@@ -814,6 +815,7 @@ class ReferenceSolver:
                 for g in self.groups:
                     mujoco.mj_step(g.model, g.data)
                 self.timing["step_seconds"] += time.perf_counter() - t0
+                self.step_times.append(time.perf_counter() - t0)
                 self.stats.steps += 1
                 continue
             for g in self.groups:
@@ -851,6 +853,7 @@ class ReferenceSolver:
             t3 = time.perf_counter()
             self.timing["update_seconds"] += t2 - t1
             self.timing["step_seconds"] += (t1 - t0) + (t3 - t2)
+            self.step_times.append(t3 - t0)
             self.stats.steps += 1
         out = []
         for ti, tree in enumerate(self.trees):

@@ -131,6 +131,8 @@ def merge_stats(results: list[ChunkResult]) -> Stats:
                 out.substeps = max(a, b)
             elif f.name == "notes":
                 out.notes = a + b
+            elif f.name == "frame_seconds":  # chunks cover the same frames: times add up
+                out.frame_seconds = list(np.add(a, b)) if a else list(b)
             else:
                 setattr(out, f.name, a + b)
     return out
