@@ -109,21 +109,62 @@ def matrices_from_quaternions(q: np.ndarray) -> np.ndarray:
     return r
 
 
-def angle_between(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-    """Rotation angle (rad) between quaternion arrays (..., 4), for q and -q
-    alike: 4 atan2(|a - b|, |a + b|) with b turned into a's hemisphere, which
-    stays exact for nearly equal rotations (2 arccos(a.b) does not: float32
-    keys 1 ulp apart would read as 0.04 degrees)."""
-    sign = np.where((qa * qb).sum(-1, keepdims=True) < 0, -1.0, 1.0)
-    b = qb * sign
-    return 4 * np.arctan2(np.linalg.norm(qa - b, axis=-1), np.linalg.norm(qa + b, axis=-1))
+# quaternion helpers (x y z w, float64, vectorised over leading axes)
 
 
-def continuous_hemisphere(q: np.ndarray) -> np.ndarray:
-    """Flip quaternions along axis 0 (time) so consecutive keys have a
-    non-negative dot product (for importers that interpolate components)."""
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def qconj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (..., 3) by unit quaternions q (..., 4)."""
+    u = q[..., :3]
+    w = q[..., 3:4]
+    t = 2.0 * cross(u, v)
+    return v + w * t + cross(u, t)
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) between unit quaternions (..., 4), for q and -q
+    alike, accurate near zero (2 arccos(a.b) is not: float32 keys 1 ulp apart
+    would read as 0.04 degrees)."""
+    s = np.where((a * b).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    d = np.linalg.norm(a - s * b, axis=-1)
+    return 4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))
+
+
+def qnormalize(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along `axis` (time) so consecutive quaternions have a
+    non-negative dot product."""
+    q = np.moveaxis(q, axis, 0)
+    dots = (q[1:] * q[:-1]).sum(-1)
+    sign = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
     out = q.copy()
-    for f in range(1, len(out)):
-        flip = (out[f] * out[f - 1]).sum(-1) < 0
-        out[f][flip] *= -1
-    return out
+    out[1:] *= sign[..., None]
+    return np.moveaxis(out, 0, axis)
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Shortest-path slerp of unit quaternions (..., 4), t (...)."""
+    d = (a * b).sum(-1)
+    b = np.where(d[..., None] < 0, -b, b)
+    d = np.abs(d)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    small = theta < 1e-6
+    st = np.where(small, 1.0, np.sin(theta))
+    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / st)
+    wb = np.where(small, t, np.sin(t * theta) / st)
+    return qnormalize(wa[..., None] * a + wb[..., None] * b)

@@ -29,7 +29,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..rotations import cross
+from ..rotations import (
+    angle_between,
+    continuous,
+    qconj,
+    qmul,
+    qnormalize,
+    qrotate,
+    slerp,
+)
 
 # a channel that stays this close to its frame-0 value is not written even
 # without reduction: float32 noise of the bake (2 ulp of the joint's distance
@@ -68,72 +76,6 @@ class Animation:
     channels: list[Channel] = field(default_factory=list)
     report: dict = field(default_factory=dict)
     group_errors: tuple = ()  # per tree: worst position error (m), angle error (rad)
-
-
-# ---------------------------------------------------------------------------
-# quaternion helpers (x y z w, float64)
-
-
-def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
-def qconj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def qrotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (..., 3) by unit quaternions q (..., 4)."""
-    u = q[..., :3]
-    w = q[..., 3:4]
-    t = 2.0 * cross(u, v)
-    return v + w * t + cross(u, t)
-
-
-def qangle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rotation angle (rad) between unit quaternions, accurate near zero."""
-    s = np.where((a * b).sum(-1, keepdims=True) < 0, -1.0, 1.0)
-    d = np.linalg.norm(a - s * b, axis=-1)
-    return 4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))
-
-
-def qnormalize(q: np.ndarray) -> np.ndarray:
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Flip signs along `axis` (time) so consecutive quaternions have a
-    non-negative dot product."""
-    q = np.moveaxis(q, axis, 0)
-    dots = (q[1:] * q[:-1]).sum(-1)
-    sign = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
-    out = q.copy()
-    out[1:] *= sign[..., None]
-    return np.moveaxis(out, 0, axis)
-
-
-def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Shortest-path slerp of unit quaternions (..., 4), t (...)."""
-    d = (a * b).sum(-1)
-    b = np.where(d[..., None] < 0, -b, b)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    small = theta < 1e-6
-    st = np.where(small, 1.0, np.sin(theta))
-    wa = np.where(small, 1.0 - t, np.sin((1.0 - t) * theta) / st)
-    wb = np.where(small, t, np.sin(t * theta) / st)
-    return qnormalize(wa[..., None] * a + wb[..., None] * b)
-
-
-def nlerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-    d = (a * b).sum(-1)
-    b = np.where(d[..., None] < 0, -b, b)
-    return qnormalize(a + (b - a) * t[..., None])
 
 
 # ---------------------------------------------------------------------------
@@ -225,7 +167,7 @@ def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
     vb = np.where(d[..., None] < 0, -vb, vb)
     half = np.arccos(np.clip(np.abs(d), 0.0, 1.0))  # half the rotation between the keys
     gap = 2.0 * np.abs(t * half - np.arctan2(t * np.sin(half), 1.0 - t + t * np.cos(half)))
-    return qangle(qnormalize(va + (vb - va) * t[..., None]), values) + gap
+    return angle_between(qnormalize(va + (vb - va) * t[..., None]), values) + gap
 
 
 def _midpoint_errors(values: np.ndarray, rotation: bool) -> np.ndarray:
@@ -234,7 +176,7 @@ def _midpoint_errors(values: np.ndarray, rotation: bool) -> np.ndarray:
     if not rotation:
         return np.linalg.norm(0.5 * (a + b) - v, axis=-1)
     half = np.full(a.shape[:2], 0.5)
-    return qangle(slerp(a, b, half), v)  # at t = 1/2 slerp and nlerp agree
+    return angle_between(slerp(a, b, half), v)  # at t = 1/2 slerp and nlerp agree
 
 
 def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
@@ -270,7 +212,7 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarr
 
 def _constant(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
     ref = values[:, :1]
-    dev = qangle(values, ref) if rotation else np.linalg.norm(values - ref, axis=-1)
+    dev = angle_between(values, ref) if rotation else np.linalg.norm(values - ref, axis=-1)
     return (dev <= tol[:, None]).all(axis=1)
 
 
@@ -312,7 +254,7 @@ def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec):
     e_base = np.linalg.norm(wp - pos, axis=-1).max(axis=0)
     e_tip = np.linalg.norm(wp + qrotate(wq, seg_vec[None]) - pos - qrotate(rot, seg_vec[None]),
                            axis=-1).max(axis=0)
-    return np.maximum(e_base, e_tip), qangle(wq, rot).max(axis=0)
+    return np.maximum(e_base, e_tip), angle_between(wq, rot).max(axis=0)
 
 
 def _chunks(rows: np.ndarray, group: np.ndarray, size: int = 1500) -> list[np.ndarray]:

@@ -22,7 +22,13 @@ import numpy as np
 
 from ..bake import Bake, TreeBake
 from ..errors import InputError
-from ..rotations import apply, compose, matrices_from_quaternions, quaternions_from_matrices
+from ..rotations import (
+    apply,
+    compose,
+    matrices_from_quaternions,
+    quaternions_from_matrices,
+    slerp,
+)
 from .axes import points_z_up, quats_z_up
 
 _DTYPES = {5126: np.float32, 5123: np.uint16, 5125: np.uint32, 5121: np.uint8}
@@ -65,19 +71,6 @@ def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
-    dot = (a * b).sum(-1, keepdims=True)
-    b = np.where(dot < 0, -b, b)
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin = np.sin(theta)
-    small = sin < 1e-9
-    wa = np.where(small, 1 - t, np.sin((1 - t) * theta) / np.where(small, 1, sin))
-    wb = np.where(small, t, np.sin(t * theta) / np.where(small, 1, sin))
-    q = wa * a + wb * b
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
 def _sample(times: np.ndarray, keys: np.ndarray, values: np.ndarray,
             rotation: bool) -> np.ndarray:
     """LINEAR sampling of one channel at `times` (clamped at the ends)."""
@@ -86,7 +79,7 @@ def _sample(times: np.ndarray, keys: np.ndarray, values: np.ndarray,
     span = np.where(j > i, keys[j] - keys[i], 1.0)
     t = np.clip((times - keys[i]) / span, 0.0, 1.0)[:, None]
     if rotation:
-        return _slerp(values[i], values[j], t)
+        return slerp(values[i], values[j], t[:, 0])
     return values[i] * (1 - t) + values[j] * t
 
 

@@ -24,7 +24,8 @@ import numpy as np
 from ..bake import Bake
 from ..errors import TreebakeError
 from ..fileio import write_bytes
-from .anim import continuous, local_transforms, qnormalize
+from ..rotations import continuous, qnormalize
+from .anim import local_transforms
 from .axes import points_y_up, quats_y_up
 from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh
 
