@@ -21,7 +21,7 @@ from .scene import QUALITIES, Quality, Scene
 from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
-from .sim.planar import REFINE
+from .sim.planar import MAX_REFINE
 from .turtle import interpret
 
 
@@ -184,9 +184,9 @@ def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
                      f"updates (first: tree {tree!r}, segment {seg}, t = {t:.3f} s, "
                      f"{acc:.0f} m/s^2): the motion there is milder than the load asks")
     if stats.refined:
-        notes.append(f"{stats.refined} substeps were split in {REFINE} while a blast, a hit, a "
-                     "capped load or a fast spin acted (pivots drift with the square of the "
-                     "step)")
+        notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
+                     "blast, a hit, a capped load or a fast spin acted (pivots drift with the "
+                     "square of the step)")
     if stats.broken:
         notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
     if stats.debris_clamped:

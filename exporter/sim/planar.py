@@ -70,8 +70,9 @@ from .stability import chain_gaps, inertia_floor
 
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
-REFINE = 8  # pymunk steps per substep while an impulsive load acts
-REFINE_SPIN = 0.015  # rad: ... or while a body turns this much in a substep
+REFINE = 8  # pymunk steps per substep at least, while an impulsive load acts
+REFINE_SPIN = 0.002  # rad: the most a body may turn in one pymunk step
+MAX_REFINE = 32  # pymunk steps per substep at most
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
 FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
 SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
@@ -93,7 +94,7 @@ class Stats:
     max_joint_gap: float = 0.0  # largest pivot separation / bone length at a frame
     limited: int = 0  # bone updates whose load was capped at MAX_ACCELERATION
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
-    refined: int = 0  # substeps split into REFINE steps (blasts, hits, caps, fast spins)
+    refined: int = 0  # substeps split into finer steps (blasts, hits, caps, fast spins)
     broken: int = 0
     debris: int = 0
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
@@ -295,7 +296,6 @@ class PlanarSolver:
         arm = self.lump_cog0 - self.pivot0
         for level in self.levels:
             level["cog_arm"] = arm[level["bones"]]
-            level["cog_arm_p"] = arm[level["pp"]]
 
     def _space(self) -> None:
         """pymunk bodies and joints, rest angles (prestress), stability rule."""
@@ -477,6 +477,8 @@ class PlanarSolver:
         omega = np.empty((n, 3))
         frame_rot = np.empty((n, 3, 3))
         attach = np.empty((n, 3))
+        cog = np.empty((n, 3))
+        vec = np.empty((n, 3))  # each bone's pivot-to-tip vector
         for lv in self.levels:
             bones, has, pp = lv["bones"], lv["has"], lv["pp"]
             rp = np.broadcast_to(EYE, (len(bones), 3, 3)).copy()
@@ -494,15 +496,14 @@ class PlanarSolver:
             heads = lv["heads"]
             head = at[h] + apply(rp[h], lv["head_arm"] + off[heads])
             step = np.zeros(grid.shape + (3,))
-            step[valid] = apply(r, lv["step"])
+            vec[bones] = step[valid] = apply(r, lv["step"])
             piv = head[:, None, :] + np.cumsum(step, axis=1) - step
             pivot[bones] = piv[valid]
-            cog = pivot[bones] + apply(r, lv["cog_arm"])
+            c = cog[bones] = pivot[bones] + apply(r, lv["cog_arm"])
             v = apply(rp, vrel[bones])
             w = apply(rp, wrel[bones])
             if lv["any"]:
-                cog_p = pivot[pp] + apply(rot[pp], lv["cog_arm_p"])
-                v[has] += vcog[pp] + cross(omega[pp], cog[has] - cog_p)
+                v[has] += vcog[pp] + cross(omega[pp], c[has] - cog[pp])
                 w[has] += omega[pp]
             vcog[bones] = v
             omega[bones] = w
@@ -510,14 +511,14 @@ class PlanarSolver:
             d = self.debris.bones
             rot[d], pivot[d], vcom_d, omega[d] = self.debris.bone_poses()
             frame_rot[d] = EYE
-        cog = pivot + apply(rot, self.lump_cog0 - self.pivot0)
+            vec[d] = apply(rot[d], self.tip0[d] - self.pivot0[d])
         com = pivot + apply(rot, self.com0 - self.pivot0)
         vcom = vcog + cross(omega, com - cog)
         if self.debris.count:
             vcom[d] = vcom_d
             vcog[d] = vcom_d  # debris bones carry no lumped children
             cog[d] = com[d]
-        return {"rot": rot, "pivot": pivot, "cog": cog, "com": com, "vcog": vcog,
+        return {"rot": rot, "pivot": pivot, "cog": cog, "com": com, "vcog": vcog, "vec": vec,
                 "vcom": vcom, "omega": omega, "frame_rot": frame_rot, "attach": attach}
 
     # ------------------------------------------------------------------
@@ -529,8 +530,7 @@ class PlanarSolver:
         Steps the debris over `dt` with them."""
         n = self.n
         rot, com, cog = pose["rot"], pose["com"], pose["cog"]
-        axis = apply(rot, self.tip0 - self.pivot0)
-        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+        axis = pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
         force = self.loads.forces(t, com, pose["vcom"], axis, self.props, dt=dt)
         pulls = self.bones.pull_forces(t)
         if pulls is not None:
@@ -541,12 +541,14 @@ class PlanarSolver:
         if self.projectiles is not None:  # impulses on hit bones, both ways
             self.projectiles.advance(t, dt, pose, self)
         # an impulsive load (a blast front, a hit, a capped load) spins parts
-        # fast, and pivots drift by (omega h)^2 per step: step finer meanwhile,
-        # and while anything still spins fast
+        # fast, and pivots drift by about (omega h)^2 r per step: step finer
+        # meanwhile, and while anything spins fast, so that no body turns
+        # more than REFINE_SPIN per step (up to MAX_REFINE steps a substep)
         spin = float(np.abs(self.state[self.in_space, 5]).max(initial=0.0))
-        self.refine = REFINE if (self.loads.blast_active or self.stats.limited > limited or (
+        impulsive = self.loads.blast_active or self.stats.limited > limited or (
             self.projectiles is not None and self.projectiles.hits > hits)
-            or spin * self.h > REFINE_SPIN) else 1
+        self.refine = int(min(MAX_REFINE, max(REFINE if impulsive else 1,
+                                              math.ceil(spin * self.h / REFINE_SPIN))))
         if self.debris.count:
             self.debris.step(dt, lambda c, v, ax: self._debris_loads(t, c, v, ax, dt))
             force[self.debris.bones] = 0.0
