@@ -107,7 +107,7 @@ def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
         "export_seconds": round(export_seconds, 3), "wall_seconds": round(wall, 3),
         "grow_seconds": t.get("grow_seconds"), "bake_sha256": digest,
         "peak_memory_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-        "culling": [n for n in bake.meta.get("notes", []) if "culling" in n],
+        "culling": bake.meta.get("culling"),
     }
 
 

@@ -122,6 +122,19 @@ def load_job(path: str, args):
     return parse_scene(raw, file=str(p))
 
 
+def _parse_timestep(text: str) -> float:
+    """'1/480' or '0.002' (s) -> seconds, within 1e-5..1/60 s."""
+    try:
+        num, _, den = text.partition("/")
+        value = float(num) / float(den) if den else float(num)
+    except (ValueError, ZeroDivisionError):
+        raise InputError(f"--timestep = {text!r} is not a number of seconds "
+                         "(e.g. 1/480 or 0.002)") from None
+    if not 1e-5 <= value <= 1 / 60:
+        raise InputError(f"--timestep = {text} s is outside 1e-5 .. 1/60 s")
+    return value
+
+
 def cmd_bake(args) -> int:
     from .bake import save_bake
     from .pipeline import bake_scene
@@ -135,7 +148,14 @@ def cmd_bake(args) -> int:
     workers = args.workers or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
-    bake = bake_scene(scene, solver=args.solver, log=log, progress=progress, workers=workers)
+    timestep = None
+    if args.timestep is not None:
+        if args.solver != "full":
+            raise InputError("--timestep is the full reference's step: use it with --solver full "
+                             "(the planar LOD's steps come from --quality)")
+        timestep = _parse_timestep(args.timestep)
+    bake = bake_scene(scene, solver=args.solver, log=log, progress=progress, workers=workers,
+                      timestep=timestep)
     path = save_bake(bake, out / f"{out.name}.npz")
     exported = None
     if args.format is None and scene.formats:
@@ -455,6 +475,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", help="job name: the output subfolder (default: the scene's name)")
     p.add_argument("--solver", choices=("planar", "full"), default="planar",
                    help="planar: the fast pymunk LOD (default); full: the MuJoCo reference")
+    p.add_argument("--timestep", metavar="SECONDS",
+                   help="the full reference's step, e.g. 1/480 (default 1/2000)")
     p.add_argument("--quality", choices=("draft", "default", "final"),
                    help="override the scene's quality level")
     p.add_argument("--duration", type=float, help="override the duration, s")

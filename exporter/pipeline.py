@@ -13,6 +13,7 @@ import numpy as np
 
 from . import __version__
 from .bake import Bake, ObjectsBake, tree_bake_from_model
+from .errors import InputError
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
 from .rig import RigOptions, build_rig
@@ -118,13 +119,13 @@ def tree_quality(scene: Scene, spec) -> Quality:
 
 
 def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads, quality: Quality | None,
-            log=None) -> tuple[list[SimTree], list[Quality], dict[str, str]]:
+            log=None) -> tuple[list[SimTree], list[Quality], dict[str, str], dict[str, int]]:
     """Rig every tree, give it its quality, and decide which need
     simulating. Static: trees the camera never sees (culling.py) and trees
     that no force reaches and start at rest (the prestress balances
     gravity). Trees the camera only ever sees from beyond `far` get its
-    `far_quality`. Returns the trees, their qualities, and why static ones
-    are static."""
+    `far_quality`. Returns the trees, their qualities, why static ones are
+    static, and how many trees each rule removed or coarsened."""
     log = log or (lambda msg: None)
     cuts = {c.tree: c for c in scene.cuts}
     pulls: dict[int, list] = {}
@@ -147,7 +148,7 @@ def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads, quality: Qu
         q = quality or tree_quality(scene, g.spec)
         if far[i] and quality is None and g.spec.quality is None and not scene.projectiles:
             q = QUALITIES[scene.camera.far_quality]
-            counts["far"] += seen[i]
+            counts["far"] += int(seen[i])
         lo, hi = bounds[i]
         reached = (not scene.prestress or i in cuts or i in pulls
                    or loads.quiet_after(centres[i], 0.5 * float(np.linalg.norm(hi[:2] - lo[:2])),
@@ -168,7 +169,7 @@ def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads, quality: Qu
     if scene.camera is not None:
         log(f"culling: {counts['unseen']} trees never in view, {counts['far']} far "
             f"({scene.camera.far_quality}), {counts['no_force']} reached by no force")
-    return sim_trees, qualities, static
+    return sim_trees, qualities, static, counts
 
 
 def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
@@ -212,7 +213,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     hi = np.max([g.model.points.max(0) for g in grown], axis=0)
     extent = np.array([lo[:2] - 20, hi[:2] + 20])
     loads = SceneLoads(scene, extent)
-    sim_trees, qualities, static = prepare(scene, grown, loads, quality, log)
+    sim_trees, qualities, static, culled = prepare(scene, grown, loads, quality, log)
     active = [t for t in sim_trees if t.active]
     log(f"{len(grown)} trees, {len(active)} simulated, "
         f"{sum(t.rig.n_bones for t in active)} bones, solver {solver}, quality {q.name}")
@@ -221,6 +222,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         "tool": f"treebake {__version__}", "scene": scene.name, "scene_hash": scene.source_hash,
         "fps": scene.fps, "duration": scene.duration, "seed": scene.seed, "solver": solver,
         "quality": asdict(q), "prestress": scene.prestress, "gravity": scene.gravity,
+        "culling": culled,  # trees removed or coarsened by each rule
     }
     timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
     motions: dict[str, TreeMotion] = {}
@@ -246,8 +248,11 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             if c.objects is not None:
                 objects = ObjectsBake(*c.objects)
     elif active:
-        from .sim.reference import ReferenceSolver
-
+        try:
+            from .sim.reference import ReferenceSolver
+        except ImportError:
+            raise InputError("--solver full needs MuJoCo: pip install 'treebake[reference]'") \
+                from None
         ref = ReferenceSolver(sim_trees, scene, q, loads, log=log, timestep=timestep)
         for tree, motion in zip(active, ref.run(progress)):
             motions[tree.name] = motion

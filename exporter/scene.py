@@ -51,7 +51,7 @@ class Quality:
 
 
 QUALITIES = {
-    "draft": Quality("draft", 480.0, 60.0, 8, 1, 1 / 12),
+    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 12),
     "default": Quality("default", 960.0, 120.0, 10, 2, 1 / 30),
     "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0),
 }

@@ -32,10 +32,12 @@ def test_default_quality_follows_the_reference(sapling_breeze):
 
 def test_draft_trades_accuracy_for_time(sapling_breeze):
     draft, default = sapling_breeze["draft"], sapling_breeze["default"]
-    # draft bends in one plane: its error is the model's (cross-wind motion)
-    assert draft.rms_position_pct > 3 * default.rms_position_pct
+    # draft merges segments into bones of 1/12 of the height and steps at
+    # 480 Hz: full run 0.049 % RMS against default's 0.012 %, most of it the
+    # model's (the merged bones), not the step's
+    assert 2 * default.rms_position_pct < draft.rms_position_pct < 0.15
     assert draft.model_rms_pct > 0.5 * draft.rms_position_pct
-    assert draft.cpu_per_sim_second < default.cpu_per_sim_second
+    # (its cost, about half of default's, is measured by `treebake accuracy`, not here)
 
 
 def test_coarser_reference_steps_stay_close(sapling_breeze):

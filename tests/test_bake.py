@@ -85,3 +85,18 @@ def test_cli_bake_writes_the_bake_and_reports(root, tmp_path, capsys):
     assert '"trees": 1' in capsys.readouterr().out
     assert main(["bake", str(root / "presets" / "calm.toml"), "--fps", "0"]) == 2
     assert main(["bake", str(tmp_path / "missing.lsys")]) == 2
+
+
+def test_cli_timestep_is_the_full_references_step(root, tmp_path, capsys):
+    pytest.importorskip("mujoco")
+    sapling = str(root / "grammars" / "sapling.lsys")
+    assert main(["bake", sapling, "--timestep", "1/480", "-q"]) == 2  # planar: no such step
+    assert "--solver full" in capsys.readouterr().err
+    assert main(["bake", sapling, "--solver", "full", "--timestep", "1/0", "-q"]) == 2
+    assert main(["bake", sapling, "--solver", "full", "--timestep", "0.5", "-q"]) == 2
+    code = main(["bake", sapling, "--solver", "full", "--timestep", "1/480", "--duration", "0.25",
+                 "--out", str(tmp_path), "-q"])
+    assert code == 0
+    bake = load_bake(tmp_path / "sapling" / "sapling.npz")
+    # rounded so that a load interval is a whole number of steps: within 10 % of 1/480 s
+    assert bake.meta["substep"] == pytest.approx(1 / 480, rel=0.1)

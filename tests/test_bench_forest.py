@@ -9,7 +9,7 @@ import pytest
 from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "bench"))
-import forest  # noqa: E402
+import forest
 
 
 def test_parallel_and_serial_forest_bakes_are_identical():

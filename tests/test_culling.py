@@ -5,7 +5,7 @@ processes gives the same bake, byte for byte."""
 import numpy as np
 import pytest
 
-from exporter.bake import save_bake
+from exporter.bake import load_bake, save_bake
 from exporter.culling import cull, half_angle
 from exporter.pipeline import bake_scene
 from exporter.scene import CameraSpec, parse_scene
@@ -34,7 +34,7 @@ def test_a_turning_camera_sees_all_round(tmp_path):
     assert cull(cam, 8.0, ring, np.full(12, 3.0)).seen.all()
 
 
-def test_unseen_trees_are_static_and_far_trees_coarser(root):
+def test_unseen_trees_are_static_and_far_trees_coarser(root, tmp_path):
     sapling = str(root / "grammars" / "sapling.lsys")
     raw = {"duration": 0.5, "tree": [
         {"grammar": sapling, "position": [10.0, 0.0]},     # in view, near
@@ -48,6 +48,9 @@ def test_unseen_trees_are_static_and_far_trees_coarser(root):
     assert not near.static and not far.static
     assert behind.static and "outside the camera" in behind.info["static"]
     assert near.info["bones"] > far.info["bones"]  # draft merges bones
+    # what each rule removed, kept in the bake's metadata
+    saved = load_bake(save_bake(bake, tmp_path / "b.npz"))
+    assert saved.meta["culling"] == {"unseen": 1, "far": 1, "no_force": 0}
 
 
 def test_parallel_chunks_give_the_same_bytes(root, tmp_path, monkeypatch):
