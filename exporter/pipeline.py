@@ -19,7 +19,7 @@ from .model import TreeModel, placed
 from .rig import RigOptions, build_rig
 from .rotations import matrices_from_quaternions
 from .scene import QUALITIES, Quality, Scene
-from .sim.common import MAX_ACCELERATION, SimTree, TreeMotion
+from .sim.common import SimTree, TreeMotion, cap_note
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
 from .sim.planar import MAX_REFINE
@@ -180,10 +180,7 @@ def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
                      f"{stats.bodies} bodies (up to {stats.max_inertia_ratio:.1f}x) to keep "
                      f"omega*h <= {quality.stability:g} at h = {h * 1e3:.3f} ms")
     if stats.limited:
-        tree, seg, t, acc = stats.first_limit
-        notes.append(f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone "
-                     f"updates (first: tree {tree!r}, segment {seg}, t = {t:.3f} s, "
-                     f"{acc:.0f} m/s^2): the motion there is milder than the load asks")
+        notes.append(cap_note(stats))
     if stats.refined:
         notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
                      "blast, a hit, a capped load or a fast spin acted (pivots drift with the "

@@ -28,16 +28,3 @@ def tip(tree: TreeBake, segment: int = -1) -> np.ndarray:
     """World position (F, 3) of the end of a segment (default: the last)."""
     s = segment % tree.n_segments
     return segment_ends(tree, [s])[:, 0]
-
-
-def kinetic_energy(bake: Bake, tree: int = 0) -> np.ndarray:
-    """Translational kinetic energy (J) per frame interval, from the baked
-    motion alone: segment mid-points differenced between frames, weighted by
-    solid-cylinder masses at `density` (1 kg/m^3 units: relative use only)."""
-    t = bake.trees[tree]
-    ends = segment_ends(t, np.arange(t.n_segments))
-    mids = 0.5 * (t.positions + ends)
-    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
-    mass = np.pi / 4 * t.width**2 * length
-    v = np.diff(mids, axis=0) * bake.fps
-    return 0.5 * (mass[None, :, None] * v * v).sum(axis=(1, 2))

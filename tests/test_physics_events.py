@@ -4,10 +4,11 @@ ground at rest, where it should."""
 import math
 
 import numpy as np
-from simkit import kinetic_energy, tip
+from simkit import tip
 
 from exporter.pipeline import bake_scene
 from exporter.scene import parse_scene
+from exporter.stress import kinetic_energy
 from exporter.sway import segment_ends
 
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"

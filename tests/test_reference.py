@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from simkit import BARE, bake_text, kinetic_energy, tip
+from simkit import BARE, bake_text, tip
 
 from exporter.bake import save_bake
 from exporter.errors import SimulationError
@@ -15,6 +15,7 @@ from exporter.lsystem import derive, load_grammar
 from exporter.pipeline import bake_scene
 from exporter.rig import build_rig
 from exporter.scene import parse_scene
+from exporter.stress import kinetic_energy
 from exporter.sway import damping_ratio, frequency, segment_ends
 from exporter.turtle import interpret
 

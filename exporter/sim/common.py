@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -11,6 +12,47 @@ from .loads import BoneProps
 
 MAX_ANGULAR_SPEED = 500.0  # rad/s: beyond this a bone is taken to be unstable
 MAX_ACCELERATION = 2000.0  # m/s^2: external loads on a bone are capped here (reported)
+
+
+def locate(trees: list[SimTree], offsets: np.ndarray, bone_tree: np.ndarray,
+           bone: int) -> tuple[str, int]:
+    """The tree name and a segment index (in that tree) of a global bone."""
+    ti = int(bone_tree[bone])
+    tree = trees[ti]
+    local = bone - int(offsets[ti])
+    return tree.name, int(np.nonzero(tree.rig.seg_bone == local)[0][0])
+
+
+def cap_loads(force: np.ndarray, mass: np.ndarray, t: float, stats,
+              locate_row: Callable[[int], tuple[str, int]]) -> np.ndarray:
+    """Scale each bone's external load (N, rows of `force`, in place) down to
+    MAX_ACCELERATION x its mass (kg). Counted on `stats.limited`; the first
+    cap is kept in `stats.first_limit` as (tree, segment, time s, m/s^2).
+
+    Loads that would accelerate a bone faster (a blast at a few metres:
+    thousands of g on a twig) break real wood, and in Chipmunk they pull
+    joints apart faster than its iterations hold them; capping the input
+    keeps the constraints consistent, and every cap is reported."""
+    acc = np.linalg.norm(force, axis=1) / np.maximum(mass, 1e-9)
+    idx = np.nonzero(acc > MAX_ACCELERATION)[0]
+    if not len(idx):
+        return force
+    if not stats.limited:
+        tree, seg = locate_row(int(idx[0]))
+        stats.first_limit = (tree, seg, round(t, 4), round(float(acc[idx[0]]), 1))
+    stats.limited += len(idx)
+    force[idx] *= (MAX_ACCELERATION / acc[idx])[:, None]
+    return force
+
+
+def cap_note(stats) -> str | None:
+    """The bake note for capped loads, or None if none were capped."""
+    if not stats.limited:
+        return None
+    tree, seg, t, acc = stats.first_limit
+    return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone updates "
+            f"(first: tree {tree!r}, segment {seg}, t = {t:.3f} s, {acc:.0f} m/s^2): the "
+            "motion there is milder than the load asks")
 
 
 @dataclass

@@ -61,7 +61,14 @@ from ..rotations import (
     quaternions_from_matrices,
 )
 from ..scene import Quality, Scene
-from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, Bones, SimTree, TreeMotion
+from .common import (
+    MAX_ANGULAR_SPEED,
+    Bones,
+    SimTree,
+    TreeMotion,
+    cap_loads,
+    locate,
+)
 from .contact import effective_mass, ground_forces
 from .debris import SLEEP_TIME, Debris
 from .loads import BoneProps, SceneLoads
@@ -536,7 +543,7 @@ class PlanarSolver:
         if pulls is not None:
             force += pulls
         limited = self.stats.limited
-        force = self._cap(force, t)
+        force = cap_loads(force, self.mass, t, self.stats, self.locate)
         hits = self.projectiles.hits if self.projectiles is not None else 0
         if self.projectiles is not None:  # impulses on hit bones, both ways
             self.projectiles.advance(t, dt, pose, self)
@@ -613,32 +620,7 @@ class PlanarSolver:
         props = BoneProps(*(getattr(self.props, f)[d] for f in
                             ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
         force = self.loads.forces(t, com, vcom, axis, props)
-        acc = np.linalg.norm(force, axis=1) / np.maximum(self.mass[d], 1e-9)
-        over = acc > MAX_ACCELERATION
-        if over.any():
-            self.stats.limited += int(over.sum())
-            force[over] *= (MAX_ACCELERATION / acc[over])[:, None]
-        return force
-
-    def _cap(self, force: np.ndarray, t: float) -> np.ndarray:
-        """Cap each bone's external load at MAX_ACCELERATION x its mass.
-
-        Loads that would accelerate a bone faster (a blast at a few metres:
-        thousands of g on a twig) break real wood, and in Chipmunk they pull
-        joints apart faster than its iterations hold them. Capping the input
-        keeps the constraints consistent; every cap is counted and reported
-        with the first tree, segment and time."""
-        acc = np.linalg.norm(force, axis=1) / np.maximum(self.mass, 1e-9)
-        over = acc > MAX_ACCELERATION
-        if not over.any():
-            return force
-        idx = np.nonzero(over)[0]
-        if not self.stats.limited:
-            tree, seg = self.locate(int(idx[0]))
-            self.stats.first_limit = (tree, seg, round(t, 4), round(float(acc[idx[0]]), 1))
-        self.stats.limited += len(idx)
-        force[idx] *= (MAX_ACCELERATION / acc[idx])[:, None]
-        return force
+        return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])))
 
     def _add_contact(self, contact, pose: dict, ftot: np.ndarray, torque: np.ndarray) -> None:
         """Add ground contact forces to the touching bones and, through
@@ -968,10 +950,7 @@ class PlanarSolver:
 
     def locate(self, bone: int) -> tuple[str, int]:
         """The tree name and a segment index (in that tree) of a global bone."""
-        ti = int(self.bone_tree[bone])
-        tree = self.trees[ti]
-        local = bone - int(self.offsets[ti])
-        return tree.name, int(np.nonzero(tree.rig.seg_bone == local)[0][0])
+        return locate(self.trees, self.offsets, self.bone_tree, bone)
 
     def bone_path(self, bone: int) -> str:
         ti = int(self.bone_tree[bone])

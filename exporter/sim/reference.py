@@ -120,7 +120,15 @@ from ..bake import ObjectsBake
 from ..errors import SimulationError
 from ..rotations import cross
 from ..scene import Quality, Scene
-from .common import MAX_ACCELERATION, MAX_ANGULAR_SPEED, Bones, SimTree, TreeMotion
+from .common import (
+    MAX_ANGULAR_SPEED,
+    Bones,
+    SimTree,
+    TreeMotion,
+    cap_loads,
+    cap_note,
+    locate,
+)
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .loads import SceneLoads
@@ -584,16 +592,7 @@ class ReferenceSolver:
         pulls = self.bones.pull_forces(t)
         if pulls is not None:
             force += pulls
-        acc = np.linalg.norm(force, axis=1) / np.maximum(self.mass, 1e-9)
-        over = acc > MAX_ACCELERATION
-        if over.any():
-            idx = np.nonzero(over)[0]
-            if not self.stats.limited:
-                tree, seg = self.locate(int(idx[0]))
-                self.stats.first_limit = (tree, seg, round(t, 4), round(float(acc[idx[0]]), 1))
-            self.stats.limited += len(idx)
-            force[idx] *= (MAX_ACCELERATION / acc[idx])[:, None]
-        return force
+        return cap_loads(force, self.mass, t, self.stats, self.locate)
 
     def _damping(self, g: _Group) -> None:
         """Structural damping as generalized forces (qfrc_applied): each
@@ -887,10 +886,7 @@ class ReferenceSolver:
 
     def locate(self, bone: int) -> tuple[str, int]:
         """The tree name and a segment index (in that tree) of a global bone."""
-        ti = int(self.bone_tree[bone])
-        tree = self.trees[ti]
-        local = bone - int(self.offsets[ti])
-        return tree.name, int(np.nonzero(tree.rig.seg_bone == local)[0][0])
+        return locate(self.trees, self.offsets, self.bone_tree, bone)
 
     def objects(self) -> ObjectsBake | None:
         """Projectile tracks, after run()."""
@@ -911,10 +907,7 @@ class ReferenceSolver:
                  ("reference: joints are two perpendicular hinges (no twist); the cone limit "
                   "is a square in the two swing angles; bones of different trees do not collide")]
         if st.limited:
-            tree, seg, t, acc = st.first_limit
-            notes.append(f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {st.limited} bone "
-                         f"updates (first: tree {tree!r}, segment {seg}, t = {t:.3f} s, "
-                         f"{acc:.0f} m/s^2)")
+            notes.append(cap_note(st))
         if st.broken:
             notes.append(f"{st.broken} joints broke; the parts fell on as free bodies")
         if st.clamped:
