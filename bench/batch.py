@@ -39,7 +39,7 @@ def job_file(folder: Path, duration: float) -> Path:
 def run(jobs_toml: Path, out: Path, jobs: int) -> float:
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "exporter.cli", "batch", str(jobs_toml), "--out",
+    subprocess.run([sys.executable, "-m", "treebake.cli", "batch", str(jobs_toml), "--out",
                     str(out), "--jobs", str(jobs)], check=True, cwd=ROOT,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return time.perf_counter() - t0

@@ -72,10 +72,10 @@ def forest_scene(count: int, duration: float, culled: bool) -> dict:
 
 def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
     """Bake (and export to glb) one configuration in this process."""
-    from exporter.bake import save_bake
-    from exporter.export import ExportOptions, export_bake
-    from exporter.pipeline import bake_scene
-    from exporter.scene import parse_scene
+    from treebake.bake import save_bake
+    from treebake.export import ExportOptions, export_bake
+    from treebake.pipeline import bake_scene
+    from treebake.scene import parse_scene
 
     scene = parse_scene(forest_scene(count, duration, setting == "lod-culled"),
                         file=f"<forest {count}>")

@@ -17,9 +17,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from exporter.fileio import write_text
-from exporter.pipeline import bake_scene
-from exporter.scene import QUALITIES, load_scene
+from treebake.fileio import write_text
+from treebake.pipeline import bake_scene
+from treebake.scene import load_scene
+from treebake.sim.quality import QUALITIES
 
 
 def bench(path: Path, quality: str | None) -> dict:

@@ -19,8 +19,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from test_physics_realism import BANDS
 
-from exporter.fileio import write_text
-from exporter.sway import pull_release
+from treebake.fileio import write_text
+from treebake.sway import pull_release
 
 
 def main() -> None:

@@ -34,7 +34,8 @@ from .errors import SimulationError
 from .fileio import atomic_path, write_text
 from .pipeline import bake_scene, grow
 from .rotations import angle_between
-from .scene import QUALITIES, Quality, Scene, parse_scene
+from .scene import Scene, parse_scene
+from .sim.quality import QUALITIES, Quality
 from .sway import segment_ends
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -18,7 +18,8 @@ from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
 from .rig import RigOptions, build_rig
 from .rotations import matrices_from_quaternions
-from .scene import QUALITIES, Quality, Scene
+from .scene import Scene
+from .sim.quality import QUALITIES, Quality
 from .sim.common import SimTree, TreeMotion, cap_note
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads

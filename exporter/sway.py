@@ -84,7 +84,8 @@ def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "d
     sway of the trunk top in the pull's direction (still air, gravity on)."""
     from .pipeline import bake_scene, grow
     from .rig import RigOptions, build_rig
-    from .scene import QUALITIES, parse_scene
+    from .scene import parse_scene
+    from .sim.quality import QUALITIES
 
     tree = {"grammar": str(Path(grammar).resolve())}
     if seed is not None:

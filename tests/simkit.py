@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from exporter.bake import Bake, TreeBake
-from exporter.pipeline import bake_scene
-from exporter.scene import parse_scene
-from exporter.sway import segment_ends
+from treebake.bake import Bake, TreeBake
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.sway import segment_ends
 
 BARE = "drag: 0\nleaf drag: 0\n"  # no air: analytic comparisons
 

@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pytest
 
-from exporter.lsystem import derive, format_modules, load_grammar
-from exporter.turtle import interpret
+from treebake.lsystem import derive, format_modules, load_grammar
+from treebake.turtle import interpret
 
 # fig -> (n, angle, axiom, productions) exactly as in ABOP figure 1.24
 FIG_1_24 = {

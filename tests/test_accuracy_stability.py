@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from exporter.accuracy import LOD_SETTINGS, pareto, run_case
-from exporter.stress import ENERGY_TOLERANCE, GAP_TOLERANCE, cases, run
+from treebake.accuracy import LOD_SETTINGS, pareto, run_case
+from treebake.stress import ENERGY_TOLERANCE, GAP_TOLERANCE, cases, run
 
 
 @pytest.fixture(scope="module")

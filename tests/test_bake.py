@@ -4,11 +4,11 @@ what the scene does not need, and the `treebake bake` command."""
 import numpy as np
 import pytest
 
-from exporter.bake import load_bake, save_bake
-from exporter.cli import main
-from exporter.errors import InputError
-from exporter.pipeline import bake_scene
-from exporter.scene import load_scene, parse_scene
+from treebake.bake import load_bake, save_bake
+from treebake.cli import main
+from treebake.errors import InputError
+from treebake.pipeline import bake_scene
+from treebake.scene import load_scene, parse_scene
 
 
 def short(root, preset, **overrides):
@@ -43,7 +43,7 @@ def test_rotations_are_unit_quaternions_and_positions_follow_the_chain(root):
     norms = np.linalg.norm(tree.rotations, axis=-1)
     assert np.abs(norms - 1).max() < 1e-5
     # every child segment starts where its parent segment ends (the rig never tears)
-    from exporter.sway import segment_ends
+    from treebake.sway import segment_ends
 
     ends = segment_ends(tree, np.arange(tree.n_segments))
     child = np.nonzero(tree.seg_parent >= 0)[0]

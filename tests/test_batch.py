@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from exporter.batch import load_jobs, run_batch
-from exporter.errors import SceneError
+from treebake.batch import load_jobs, run_batch
+from treebake.errors import SceneError
 
 SAPLING = "grammars/sapling.lsys"
 
@@ -107,7 +107,7 @@ def test_killed_batch_resumes_to_the_same_bytes(tmp_path, root):
     clean = tmp_path / "clean"
     run_batch(load_jobs(jobs_path), clean, workers=1)
     killed = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "exporter.cli", "batch", str(jobs_path), "--out", str(killed),
+    cmd = [sys.executable, "-m", "treebake.cli", "batch", str(jobs_path), "--out", str(killed),
            "--jobs", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)

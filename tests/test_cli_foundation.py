@@ -6,11 +6,11 @@ import sys
 
 import pytest
 
-from exporter.cli import main
+from treebake.cli import main
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "exporter.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "treebake.cli", *args], capture_output=True,
                           text=True, check=False)
 
 

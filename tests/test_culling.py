@@ -5,11 +5,11 @@ processes gives the same bake, byte for byte."""
 import numpy as np
 import pytest
 
-from exporter.bake import load_bake, save_bake
-from exporter.culling import cull, half_angle
-from exporter.pipeline import bake_scene
-from exporter.scene import CameraSpec, parse_scene
-from exporter.sim import run
+from treebake.bake import load_bake, save_bake
+from treebake.culling import cull, half_angle
+from treebake.pipeline import bake_scene
+from treebake.scene import CameraSpec, parse_scene
+from treebake.sim import run
 
 
 def test_cull_sees_in_front_not_behind_and_measures_distance():

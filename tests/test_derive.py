@@ -2,8 +2,8 @@
 
 import pytest
 
-from exporter.errors import GrammarError, LimitError
-from exporter.lsystem import Limits, derive, derive_many, format_modules, parse_grammar
+from treebake.errors import GrammarError, LimitError
+from treebake.lsystem import Limits, derive, derive_many, format_modules, parse_grammar
 
 
 def s(grammar_text, **kw):

@@ -6,11 +6,11 @@ import copy
 import numpy as np
 import pytest
 
-from exporter.bake import save_bake
-from exporter.cli import main
-from exporter.diff import TopologyError, diff_bakes, format_report
-from exporter.pipeline import bake_scene
-from exporter.scene import load_scene
+from treebake.bake import save_bake
+from treebake.cli import main
+from treebake.diff import TopologyError, diff_bakes, format_report
+from treebake.pipeline import bake_scene
+from treebake.scene import load_scene
 
 
 @pytest.fixture(scope="module")
@@ -96,8 +96,8 @@ def test_gltf_files_diff_like_their_bakes(bake, tmp_path):
     """Exported glb files read back (our reader samples the channels) and
     compare: the same bake twice is identical; a 5 cm push of one segment
     in one frame shows up there, by name, above the 2 mm export tolerance."""
-    from exporter.diff import load_any
-    from exporter.export import export_bake
+    from treebake.diff import load_any
+    from treebake.export import export_bake
 
     a = export_bake(bake, tmp_path, "a").folder / "a.glb"
     b = export_bake(copy.deepcopy(bake), tmp_path, "b").folder / "b.glb"

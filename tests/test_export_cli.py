@@ -6,7 +6,7 @@ import json
 import pytest
 from PIL import Image
 
-from exporter.cli import main
+from treebake.cli import main
 
 ALL = "glb,gltf,obj,usd,usda,preview"
 

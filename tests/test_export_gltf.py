@@ -14,9 +14,9 @@ from bakes import NAMES, preset_bake
 from gltfread import Gltf, quat_to_matrix
 from validator import validate
 
-from exporter.exchange.anim import ReduceOptions
-from exporter.exchange.gltf import export_gltf
-from exporter.exchange.mesh import MeshOptions, tree_mesh
+from treebake.exchange.anim import ReduceOptions
+from treebake.exchange.gltf import export_gltf
+from treebake.exchange.mesh import MeshOptions, tree_mesh
 
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up
 

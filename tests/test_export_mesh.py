@@ -12,10 +12,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import ROOT, preset_bake
 
-from exporter.bake import tree_bake_from_model
-from exporter.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
-from exporter.lsystem import derive, load_grammar
-from exporter.turtle import interpret
+from treebake.bake import tree_bake_from_model
+from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
+from treebake.lsystem import derive, load_grammar
+from treebake.turtle import interpret
 
 
 def rest_tree(grammar: str):

@@ -15,10 +15,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 from bakes import preset_bake
 from gltfread import Gltf
 
-from exporter.exchange.anim import ReduceOptions
-from exporter.exchange.gltf import export_gltf
-from exporter.exchange.mesh import MeshOptions, tree_mesh
-from exporter.exchange.obj import export_obj
+from treebake.exchange.anim import ReduceOptions
+from treebake.exchange.gltf import export_gltf
+from treebake.exchange.mesh import MeshOptions, tree_mesh
+from treebake.exchange.obj import export_obj
 
 
 def read_obj_vertices(path: Path) -> dict[str, np.ndarray]:

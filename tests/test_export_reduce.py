@@ -5,7 +5,7 @@ in one hemisphere."""
 
 import numpy as np
 
-from exporter.exchange.anim import ReduceOptions, animate, continuous, reduce_keys
+from treebake.exchange.anim import ReduceOptions, animate, continuous, reduce_keys
 
 
 def _lerp_rebuild(values, keep):

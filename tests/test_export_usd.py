@@ -15,8 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
 
-from exporter.exchange.mesh import pose, tree_mesh
-from exporter.exchange.usd import export_usd, validate
+from treebake.exchange.mesh import pose, tree_mesh
+from treebake.exchange.usd import export_usd, validate
 
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
 

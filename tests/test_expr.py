@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from exporter.errors import GrammarError
-from exporter.lsystem.expr import compile_expr, evaluate_constant
+from treebake.errors import GrammarError
+from treebake.lsystem.expr import compile_expr, evaluate_constant
 
 
 @pytest.mark.parametrize("text, expected", [

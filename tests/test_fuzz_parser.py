@@ -8,9 +8,9 @@ from pathlib import Path
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from exporter.errors import GrammarError, LimitError
-from exporter.lsystem import Limits, derive, parse_grammar
-from exporter.turtle import interpret
+from treebake.errors import GrammarError, LimitError
+from treebake.lsystem import Limits, derive, parse_grammar
+from treebake.turtle import interpret
 
 LIBRARY = sorted((Path(__file__).resolve().parent.parent / "grammars").rglob("*.lsys"))
 TEXTS = [p.read_text() for p in LIBRARY]

@@ -8,9 +8,9 @@ import sys
 import pytest
 from conftest import ROOT
 
-from exporter.bake import save_bake
-from exporter.cli import main
-from exporter.pipeline import bake_scene
+from treebake.bake import save_bake
+from treebake.cli import main
+from treebake.pipeline import bake_scene
 
 sys.path.insert(0, str(ROOT / "tests" / "golden"))
 from regenerate import GOLDEN, golden_scene

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from exporter.errors import GrammarError
-from exporter.lsystem import load_grammar, parse_grammar
+from treebake.errors import GrammarError
+from treebake.lsystem import load_grammar, parse_grammar
 
 
 def test_settings_defines_and_productions():

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from simkit import BARE, bake_text, tip
 
-from exporter.forces import Wind, drag, kaimal_spectrum, synthesize
-from exporter.sway import damping_ratio, frequency
+from treebake.forces import Wind, drag, kaimal_spectrum, synthesize
+from treebake.sway import damping_ratio, frequency
 
 E, RHO = 8.0e9, 800.0  # green wood, Pa and kg/m^3
 

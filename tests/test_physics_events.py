@@ -6,10 +6,10 @@ import math
 import numpy as np
 from simkit import tip
 
-from exporter.pipeline import bake_scene
-from exporter.scene import parse_scene
-from exporter.stress import kinetic_energy
-from exporter.sway import segment_ends
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.stress import kinetic_energy
+from treebake.sway import segment_ends
 
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
 

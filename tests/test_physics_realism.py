@@ -13,7 +13,7 @@ fifth of its swing."""
 import pytest
 from conftest import GRAMMARS
 
-from exporter.sway import pull_release
+from treebake.sway import pull_release
 
 BANDS = {  # species: (f1 Hz low, high), (damping ratio low, high)
     "spruce": ((0.3, 0.7), (0.08, 0.5)),

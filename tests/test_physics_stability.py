@@ -11,9 +11,9 @@ the substep h = 1/substep_rate and s = quality.stability."""
 import numpy as np
 import pytest
 
-from exporter.pipeline import bake_scene
-from exporter.scene import parse_scene
-from exporter.stress import kinetic_energy
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.stress import kinetic_energy
 
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
 

@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 from simkit import BARE, bake_text, tip
 
-from exporter.bake import save_bake
-from exporter.errors import SimulationError
-from exporter.lsystem import derive, load_grammar
-from exporter.pipeline import bake_scene
-from exporter.rig import build_rig
-from exporter.scene import parse_scene
-from exporter.stress import kinetic_energy
-from exporter.sway import damping_ratio, frequency, segment_ends
-from exporter.turtle import interpret
+from treebake.bake import save_bake
+from treebake.errors import SimulationError
+from treebake.lsystem import derive, load_grammar
+from treebake.pipeline import bake_scene
+from treebake.rig import build_rig
+from treebake.scene import parse_scene
+from treebake.stress import kinetic_energy
+from treebake.sway import damping_ratio, frequency, segment_ends
+from treebake.turtle import interpret
 
 pytest.importorskip("mujoco")
-from exporter.sim import reference
+from treebake.sim import reference
 
 E, RHO, G = 8.0e9, 800.0, 9.81  # green wood (Pa, kg/m^3), gravity (m/s^2)
 
@@ -190,7 +190,7 @@ def test_instability_is_reported_with_tree_segment_and_time(root, monkeypatch):
 
 def test_non_finite_loads_are_reported(root, monkeypatch):
     """NaN from the loads (a broken force field) never reaches the bake."""
-    from exporter.sim.loads import SceneLoads
+    from treebake.sim.loads import SceneLoads
 
     real = SceneLoads.forces
 
@@ -211,8 +211,8 @@ def test_non_finite_loads_are_reported(root, monkeypatch):
 
 def test_timestep_and_force_rate_options(root):
     """Coarser steps for the accuracy report: whole force intervals per frame."""
-    from exporter.pipeline import grow, prepare
-    from exporter.sim.loads import SceneLoads
+    from treebake.pipeline import grow, prepare
+    from treebake.sim.loads import SceneLoads
 
     scene = parse_scene(calm(str(root / "grammars" / "sapling.lsys")), file="<test>")
     loads = SceneLoads(scene)
@@ -304,8 +304,8 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
     free joint changes MuJoCo's sparse layout)."""
     import mujoco
 
-    from exporter.pipeline import grow, prepare
-    from exporter.sim.loads import SceneLoads
+    from treebake.pipeline import grow, prepare
+    from treebake.sim.loads import SceneLoads
 
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 1.0,
            "projectile": [{"shape": "box", "size": 0.3, "mass": 5.0, "position": [-3.0, 0, 1.0],

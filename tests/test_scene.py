@@ -4,8 +4,8 @@ name the file, the key, the value and the allowed range."""
 import pytest
 from conftest import PRESETS
 
-from exporter.errors import SceneError
-from exporter.scene import BEAUFORT, load_scene, parse_scene
+from treebake.errors import SceneError
+from treebake.scene import BEAUFORT, load_scene, parse_scene
 
 SAPLING = str(PRESETS.parent / "grammars" / "sapling.lsys")
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from exporter.errors import GrammarError
-from exporter.lsystem import derive, parse_grammar
-from exporter.turtle import interpret
+from treebake.errors import GrammarError
+from treebake.lsystem import derive, parse_grammar
+from treebake.turtle import interpret
 
 
 def model(text, **kw):

@@ -60,7 +60,8 @@ from ..rotations import (
     matrices_from_rotvec,
     quaternions_from_matrices,
 )
-from ..scene import Quality, Scene
+from ..scene import Scene
+from .quality import Quality
 from .common import (
     MAX_ANGULAR_SPEED,
     Bones,

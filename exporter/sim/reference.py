@@ -119,7 +119,8 @@ import numpy as np
 from ..bake import ObjectsBake
 from ..errors import SimulationError
 from ..rotations import cross
-from ..scene import Quality, Scene
+from ..scene import Scene
+from .quality import Quality
 from .common import (
     MAX_ANGULAR_SPEED,
     Bones,

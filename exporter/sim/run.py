@@ -19,7 +19,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..scene import Quality, Scene
+from ..scene import Scene
+from .quality import Quality
 from .common import SimTree, TreeMotion
 from .loads import SceneLoads
 from .planar import PlanarSolver, Stats

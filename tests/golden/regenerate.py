@@ -15,9 +15,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 sys.path.insert(0, str(ROOT))
 
-from exporter.bake import save_bake
-from exporter.pipeline import bake_scene
-from exporter.scene import parse_scene
+from treebake.bake import save_bake
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
 
 # name: scene (paths relative to the repository root); kept small and short
 GOLDEN = {

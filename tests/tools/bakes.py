@@ -7,9 +7,9 @@ import functools
 import tomllib
 from pathlib import Path
 
-from exporter.bake import Bake
-from exporter.pipeline import bake_scene
-from exporter.scene import load_scene, parse_scene
+from treebake.bake import Bake
+from treebake.pipeline import bake_scene
+from treebake.scene import load_scene, parse_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 PRESETS = ROOT / "presets"

@@ -1,0 +1,38 @@
+"""Quality levels: how finely the planar LOD simulates (the simulation side
+owns them; scenes and the command line only pick one by name)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Quality:
+    """Simulation settings. substep_rate: physics steps per second (Hz).
+    force_rate: how often forces are re-evaluated (Hz); between evaluations
+    they are held. iterations: pymunk solver iterations. planes: 1 = one
+    bending plane per limb (the card's design), 2 = two perpendicular planes.
+    bone_length: bones are merged segments at least this fraction of the tree
+    height (0 = one bone per segment). stability: the largest allowed
+    omega*h of any joint before a rotary-inertia floor is applied
+    (see docs/physics.md). joint_correction: fraction of a joint's position
+    error corrected per substep. coupling: how a parent chain carries its
+    children (docs/physics.md): "apparent" (their apparent mass at the
+    parent's frequency) or "rigid"."""
+
+    name: str = "default"
+    substep_rate: float = 960.0
+    force_rate: float = 120.0
+    iterations: int = 10
+    planes: int = 2
+    bone_length: float = 0.0
+    stability: float = 1.0
+    joint_correction: float = 0.02
+    coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
+
+
+QUALITIES = {
+    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 12),
+    "default": Quality("default", 960.0, 120.0, 10, 2, 1 / 30),
+    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0),
+}
