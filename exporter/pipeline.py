@@ -245,6 +245,17 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         for c in chunks:
             if c.objects is not None:
                 objects = ObjectsBake(*c.objects)
+    elif active and solver == "linear":
+        from .sim.linear import LinearSolver
+
+        lin = LinearSolver(sim_trees, scene, q, loads, log=log)
+        for tree, motion in zip(active, lin.run(progress)):
+            motions[tree.name] = motion
+        meta["substep"] = lin.h
+        meta["notes"] = []
+        timing.update(step_seconds=round(lin.stats.step_seconds, 3),
+                      update_seconds=round(lin.stats.update_seconds, 3),
+                      factor_seconds=round(lin.stats.factor_seconds, 3))
     elif active:
         try:
             from .sim.reference import ReferenceSolver

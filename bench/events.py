@@ -1,0 +1,119 @@
+"""Events on both solvers: does a cut, a hit or a blast create energy?
+
+For each preset (felling, boxes) and the 50 kg blast at 3 m from a sapling,
+bake with the planar LOD and with the MuJoCo reference and measure from the
+bakes alone (independent of either solver's bookkeeping):
+
+- energy proxy: kinetic + gravitational energy of the segment midpoints,
+  mass ~ width^2 x length (solid cylinders, unit density), per tree, as a
+  ratio to the tree's energy at frame 0 measured from the lowest point it
+  reaches (so a tree that only falls stays <= 1);
+- centre of mass of the tree (its height at the event and the highest it
+  reaches after);
+- the events (cut, hinge snap, breaks), broken joints, how far parts land;
+- felling: time from the cut to the stem touching the ground, resting
+  azimuth of the stem; boxes: the highest point a box reaches after a hit.
+
+    python bench/events.py [--cases felling boxes blast] [--solvers planar full]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from treebake.pipeline import bake_scene  # noqa: E402
+from treebake.scene import load_scene, parse_scene  # noqa: E402
+from treebake.sway import segment_ends  # noqa: E402
+
+G = 9.81
+
+
+def tree_energy(tree, fps: float) -> dict:
+    """Energy proxy and centre of mass per frame of one baked tree."""
+    ends = segment_ends(tree, np.arange(tree.n_segments))
+    mids = 0.5 * (tree.positions + ends)
+    length = np.linalg.norm(tree.points[tree.seg_end] - tree.points[tree.seg_start], axis=1)
+    mass = np.pi / 4 * tree.width**2 * length
+    v = np.gradient(mids, axis=0) * fps if len(mids) > 2 else np.zeros_like(mids)
+    ke = 0.5 * (mass[None, :, None] * v * v).sum(axis=(1, 2))
+    com = (mass[None, :, None] * mids).sum(1) / mass.sum()
+    pe = mass.sum() * G * (com[:, 2] - min(0.0, float(mids[..., 2].min())))
+    e = ke + pe
+    return {"energy": e, "ratio": e / max(e[0], 1e-12), "com": com, "mids": mids}
+
+
+def measure(bake, scene) -> dict:
+    out = {"trees": []}
+    for tb in bake.trees:
+        if tb.static:
+            continue
+        en = tree_energy(tb, bake.fps)
+        events = tb.info.get("events", [])
+        broken = sum(1 for e in events if "broke" in str(e))
+        base = tb.rest_base
+        reach = float(np.linalg.norm(en["mids"][-1, :, :2] - base[0, :2], axis=1).max())
+        out["trees"].append({
+            "name": tb.name, "max_energy_ratio": round(float(en["ratio"].max()), 4),
+            "at_frame": int(np.argmax(en["ratio"])),
+            "com_start": round(float(en["com"][0, 2]), 3),
+            "com_max_after_start": round(float(en["com"][1:, 2].max()), 3),
+            "com_end": round(float(en["com"][-1, 2]), 3),
+            "broken": broken, "events": [str(e) for e in events][:6],
+            "farthest_part_m": round(reach, 2)})
+    if bake.objects is not None:
+        pos = bake.objects.positions.astype(float)
+        out["objects_max_height_after_launch"] = [
+            round(float(pos[:, i, 2].max()), 2) for i in range(pos.shape[1])]
+    return out
+
+
+CASES = {
+    "felling": lambda: load_scene(ROOT / "presets" / "felling.toml"),
+    "boxes": lambda: load_scene(ROOT / "presets" / "boxes.toml"),
+    "blast": lambda: parse_scene({
+        "name": "blast50", "duration": 5.0, "fps": 24.0,
+        "tree": [{"grammar": str(ROOT / "grammars" / "sapling.lsys")}],
+        "explosion": [{"position": [3.0, 0.0, 1.0], "time": 0.5, "charge": 50.0}]},
+        file="<blast>"),
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--solvers", nargs="*", default=["planar", "full"])
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
+    args = ap.parse_args()
+    rows = []
+    for case in args.cases:
+        for solver in args.solvers:
+            scene = CASES[case]()
+            bake = bake_scene(scene, solver=solver, workers=1)
+            m = measure(bake, scene)
+            m.update(case=case, solver=solver)
+            rows.append(m)
+            for t in m["trees"]:
+                print(f"{case:<8} {solver:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
+                      f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
+                      f"{t['com_max_after_start']:.2f} -> end {t['com_end']:.2f}  broken "
+                      f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m", flush=True)
+                for e in t["events"]:
+                    print(f"{'':<17}{e}")
+            if "objects_max_height_after_launch" in m:
+                print(f"{'':<17}objects' highest points: {m['objects_max_height_after_launch']}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "events.json").write_text(json.dumps(rows, indent=2, default=str) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,185 @@
+"""Production jobs: cost and error of each solver setting against the truth.
+
+The jobs a user bakes (spruce, oak and willow in grammar-job wind, a
+50-tree forest in a strong breeze), each with every setting, each setting in
+its own process (`--workers 1`), in one run:
+
+- cost: CPU seconds of the whole process (what `/usr/bin/time` reports:
+  start-up, growing, rigging, simulating, saving) and of the simulation
+  alone (the bake's own timing);
+- error: every segment's end over every frame against the truth — the MuJoCo
+  reference with one bone per segment (`--quality final`) at 1/2000 s — as %
+  of the tree's height: RMS and max, the median over trees for a forest.
+
+As in `treebake accuracy`, the grammars are baked without breaking (no
+rupture, strength or anchor): a break is a branching event after which two
+runs need not follow each other, so errors would measure chaos.
+
+    python bench/production.py [--jobs spruce oak willow forest50]
+                               [--settings lod ref240 ref480] [--out out/bench]
+
+Timings on a shared machine are noisy: read the ratios within one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "bench"))
+
+JOBS = {  # name: (scene keys, duration s)
+    "spruce": ({"tree": [{"grammar": "grammars/spruce.lsys"}],
+                "wind": {"speed": 6.7, "turbulence": 0.25}}, 4.0),
+    "oak": ({"tree": [{"grammar": "grammars/oak.lsys"}],
+             "wind": {"speed": 6.7, "turbulence": 0.25}}, 4.0),
+    "willow": ({"tree": [{"grammar": "grammars/willow.lsys"}],
+                "wind": {"speed": 12.0, "turbulence": 0.25}}, 6.0),
+    "forest50": (None, 4.0),  # bench/forest.py's forest of 50 trees, no camera
+}
+SETTINGS = {  # name: bake_scene keyword arguments (quality by name)
+    "lod": {"solver": "planar", "quality": "default"},
+    "lod-final": {"solver": "planar", "quality": "final"},
+    "ref240": {"solver": "full", "quality": "default", "timestep": 1 / 240},
+    "ref480": {"solver": "full", "quality": "default", "timestep": 1 / 480},
+    "ref240-final": {"solver": "full", "quality": "final", "timestep": 1 / 240},
+    "truth": {"solver": "full", "quality": "final", "timestep": 1 / 2000},
+}
+
+
+def unbreakable(grammar: str, folder: Path) -> str:
+    """A copy of a grammar (path relative to the checkout) without breaking."""
+    src = (ROOT / grammar).read_text().splitlines()
+    keep = [ln for ln in src if ln.split(":")[0].strip() not in ("rupture", "strength", "anchor")]
+    if len(keep) == len(src):
+        raise ValueError(f"{grammar}: no rupture, strength or anchor line to remove")
+    path = folder / grammar.replace("/", "_")
+    path.write_text("\n".join(keep) + "\n")
+    return str(path)
+
+
+def job_scene(job: str, folder: Path):
+    from treebake.scene import parse_scene
+
+    keys, duration = JOBS[job]
+    if keys is None:
+        from forest import forest_scene
+
+        raw = forest_scene(50, duration, culled=False)
+        raw["forest"]["grammars"] = [unbreakable(str(Path(g).relative_to(ROOT)), folder)
+                                     for g in raw["forest"]["grammars"]]
+    else:
+        raw = json.loads(json.dumps(keys))
+        for t in raw["tree"]:
+            t["grammar"] = unbreakable(t["grammar"], folder)
+        raw.update(name=job, duration=duration)
+    return parse_scene(raw, file=f"<production {job}>")
+
+
+def run_one(job: str, setting: str, out: Path) -> dict:
+    """Bake one job with one setting in this process; save the bake to `out`."""
+    from treebake.bake import save_bake
+    from treebake.pipeline import bake_scene
+    from treebake.sim.quality import QUALITIES
+
+    kw = dict(SETTINGS[setting])
+    kw["quality"] = QUALITIES[kw["quality"]]
+    scene = job_scene(job, out.parent)
+    cpu0 = time.process_time()
+    bake = bake_scene(scene, workers=1, **kw)
+    cpu = time.process_time() - cpu0
+    save_bake(bake, out)
+    t = bake.timing
+    return {"bake_cpu_seconds": round(cpu, 3),
+            "physics_seconds": round(t.get("step_seconds", 0) + t.get("update_seconds", 0), 3),
+            "solvers": bake.meta.get("solvers"), "notes": bake.meta.get("notes", [])}
+
+
+def measure(job: str, setting: str, folder: Path) -> dict:
+    """run_one in a fresh process; its whole CPU time from the parent."""
+    path = folder / f"{job}-{setting}.npz"
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run([sys.executable, __file__, "--one", job, setting, str(path)],
+                          capture_output=True, text=True, check=False, cwd=ROOT)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"{job} {setting}: {done.stderr[-3000:]}")
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    row["process_cpu_seconds"] = round(after.ru_utime + after.ru_stime
+                                       - before.ru_utime - before.ru_stime, 3)
+    row["path"] = str(path)
+    return row
+
+
+def tree_errors(a, truth) -> tuple[list[float], list[float]]:
+    """Per tree: RMS and max error of every segment's end, % of height."""
+    from treebake.sway import segment_ends
+
+    rms, mx = [], []
+    for ta, tt in zip(a.trees, truth.trees):
+        if tt.static and ta.static:
+            continue
+        frames = len(truth.times)
+
+        def ends(tb):
+            e = segment_ends(tb, np.arange(tb.n_segments))
+            return np.repeat(e, frames, axis=0) if tb.static else e
+
+        d = np.linalg.norm(ends(ta) - ends(tt), axis=-1)
+        h = max(tt.height, 1e-9)
+        rms.append(100 * float(np.sqrt(np.mean(d * d))) / h)
+        mx.append(100 * float(d.max()) / h)
+    return rms, mx
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--jobs", nargs="*", default=list(JOBS), choices=list(JOBS))
+    ap.add_argument("--settings", nargs="*", default=["lod", "ref240", "ref480"],
+                    choices=[s for s in SETTINGS if s != "truth"])
+    ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
+    ap.add_argument("--one", nargs=3, metavar=("JOB", "SETTING", "PATH"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one:
+        print(json.dumps(run_one(args.one[0], args.one[1], Path(args.one[2]))))
+        return
+    from treebake.bake import load_bake
+
+    rows = []
+    print(f"{'job':<9} {'setting':<13} {'process CPU s':>13} {'sim CPU s':>9} "
+          f"{'RMS %':>8} {'max %':>8}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for job in args.jobs:
+            truth_row = measure(job, "truth", folder)
+            truth = load_bake(truth_row["path"])
+            for setting in ["truth", *args.settings]:
+                r = truth_row if setting == "truth" else measure(job, setting, folder)
+                rms, mx = tree_errors(load_bake(r["path"]), truth)
+                r.update(job=job, setting=setting,
+                         rms_pct=round(float(np.median(rms)), 5) if rms else 0.0,
+                         max_pct=round(float(np.median(mx)), 5) if mx else 0.0,
+                         worst_rms_pct=round(max(rms), 5) if rms else 0.0,
+                         worst_max_pct=round(max(mx), 5) if mx else 0.0)
+                r.pop("path")
+                rows.append(r)
+                print(f"{job:<9} {setting:<13} {r['process_cpu_seconds']:>13.2f} "
+                      f"{r['bake_cpu_seconds']:>9.2f} {r['rms_pct']:>8.4f} {r['max_pct']:>8.3f}",
+                      flush=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "production.json").write_text(json.dumps({"rows": rows}, indent=2) + "\n")
+    print(f"written {out / 'production.json'}")
+
+
+if __name__ == "__main__":
+    main()
