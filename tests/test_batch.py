@@ -66,7 +66,7 @@ seeds = [1, 2]
         with pytest.raises(SceneError, match="plain name"):
             load_jobs(job_file(tmp_path, root, f'[[job]]\nname = "{bad}"\n'
                                                f'grammar = "ROOT/{SAPLING}"\n'))
-    with pytest.raises(SceneError, match=r"job\[0\]\.duration: = -1"):
+    with pytest.raises(SceneError, match=r"job\[0\]\.duration = -1 is out of range"):
         load_jobs(job_file(tmp_path, root, f'[[job]]\ngrammar = "ROOT/{SAPLING}"\n'
                                            "duration = -1\n"))
     with pytest.raises(SceneError, match="two jobs are named"):
