@@ -105,5 +105,7 @@ def test_projectile_and_tree_exchange_momentum(tmp_path):
     assert after < 0.5 * before  # it hit something
     top = tip(b.trees[0])
     assert top[:, 0].max() > 0.05  # pushed along +x
-    # and it is the stem's stiffness, not a teleport: it swings back
-    assert top[:, 0].min() < 0.5 * top[:, 0].max()
+    # and it is the stem's stiffness, not a teleport: it swings back after the
+    # push (the minimum over the whole run would be frame 0, at rest, always)
+    peak = int(np.argmax(top[:, 0]))
+    assert peak < len(top) - 1 and top[peak:, 0].min() < 0.5 * top[peak, 0]
