@@ -187,8 +187,12 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             keys = _accessor(doc, blob, sampler["input"])[:, 0]
             if len(keys) > 1 and not (np.diff(keys) > 0).all():
                 raise ValueError("animation key times do not increase (damaged data)")
-            channels[(ch["target"]["node"], ch["target"]["path"])] = (
-                keys, _accessor(doc, blob, sampler["output"]))
+            values = _accessor(doc, blob, sampler["output"])
+            if ch["target"]["path"] == "rotation" and len(values) and \
+                    np.abs(np.linalg.norm(values, axis=1) - 1.0).max() > 1e-3:
+                raise ValueError(f"node {ch['target']['node']}: a rotation key is not a unit "
+                                 "quaternion (damaged data)")
+            channels[(ch["target"]["node"], ch["target"]["path"])] = (keys, values)
             all_keys.append(keys)
     if "fps" in info and "frames" in info:
         times = np.arange(int(info["frames"])) / float(info["fps"])
