@@ -145,10 +145,10 @@ def case_resume_code(tmp):
 
 def case_kill_worker(tmp):
     out = tmp / "out"
-    proc = start("batch", jobs_file(tmp, 4, 3.0), "--out", out, "-j", "2", "--json")
+    proc = start("batch", jobs_file(tmp, 4, 3.0), "--out", out, "-j", "2")
     os.kill(wait_busy(proc, out, 2)[0], signal.SIGKILL)
     stdout, stderr = proc.communicate(timeout=600)
-    s = json.loads(stdout)
+    s = json.loads((out / "batch-summary.json").read_text())
     statuses = [r["status"] for r in s["results"]]
     retried = stderr.count("retrying")
     return (f"exit {proc.returncode}, {statuses.count('done')}/4 done, {retried} retried",
