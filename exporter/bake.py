@@ -17,6 +17,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -162,9 +163,21 @@ def _json(data: np.ndarray):
 
 
 def load_bake(path: str | Path) -> Bake:
+    """Read a bake; anything that is not a whole treebake bake (empty,
+    truncated, another kind of file, damaged arrays) is an InputError."""
     p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: bake file not found")
+    if p.stat().st_size == 0:
+        raise InputError(f"{p}: the bake file is empty (0 bytes): an interrupted write or a "
+                         "damaged copy; bake it again")
+    if not zipfile.is_zipfile(p):
+        raise InputError(f"{p}: not a treebake bake (a bake is a .npz zip archive written by "
+                         "`treebake bake`)")
     try:
         with np.load(p, allow_pickle=False) as z:
+            if "meta" not in z:
+                raise InputError(f"{p}: a .npz archive, but not a treebake bake (no meta)")
             meta = _json(z["meta"])
             if meta.get("format_version") != FORMAT_VERSION:
                 raise InputError(f"{p}: bake format {meta.get('format_version')} is not "
@@ -188,8 +201,31 @@ def load_bake(path: str | Path) -> Bake:
             if "objects.info" in z:
                 objects = ObjectsBake(_json(z["objects.info"])["shapes"], z["objects.sizes"],
                                       z["objects.positions"], z["objects.rotations"])
-            return Bake(z["times"], trees, meta, objects)
-    except (OSError, zipfile.BadZipFile, KeyError, ValueError) as exc:
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{p}: not a readable treebake bake ({exc})") from None
+            bake = Bake(z["times"], trees, meta, objects)
+            _check_shapes(bake)
+            return bake
+    except InputError:
+        raise
+    except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError, ValueError, TypeError,
+            IndexError, AttributeError) as exc:
+        raise InputError(f"{p}: not a readable treebake bake: damaged or truncated "
+                         f"({type(exc).__name__}: {exc})") from None
+
+
+def _check_shapes(bake: Bake) -> None:
+    """Arrays that disagree with each other (a damaged file) raise ValueError."""
+    frames = len(bake.times)
+    for t in bake.trees:
+        s = t.n_segments
+        if t.positions.shape not in ((frames, s, 3), (1, s, 3)) or \
+                t.rotations.shape != t.positions.shape[:2] + (4,):
+            raise ValueError(f"tree {t.name!r}: positions {t.positions.shape} and rotations "
+                             f"{t.rotations.shape} do not fit {frames} frames x {s} segments")
+        for key in ("seg_end", "seg_parent", "seg_limb", "width", "leaf", "leaf_size"):
+            if getattr(t, key).shape != (s,):
+                raise ValueError(f"tree {t.name!r}: {key} has shape {getattr(t, key).shape}, "
+                                 f"expected ({s},)")
+        if len(t.paths) != s:
+            raise ValueError(f"tree {t.name!r}: {len(t.paths)} paths for {s} segments")
+        if s and (t.seg_start.max() >= len(t.points) or t.seg_end.max() >= len(t.points)):
+            raise ValueError(f"tree {t.name!r}: a segment points past its {len(t.points)} points")

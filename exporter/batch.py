@@ -4,10 +4,14 @@
 A job is a scene (or a grammar baked alone, or a grammar placed in a
 scene's forces) with overrides and export formats; docs/batch.md describes
 the job file. A finished job leaves `job.json` in its folder, written last:
-its `hash` covers the tool version, the job's settings and the content of
-every input file, so a rerun skips jobs whose inputs did not change and
-redoes the rest. Files appear only when complete (temporary name, then
-rename), so a killed batch leaves no half-written file and resumes cleanly.
+its `hash` covers the tool version, the package's own code, the job's
+settings and the content of every input file, and it records every output's
+size and sha256; a rerun skips a job only if the hash matches and every
+output still has its recorded size and sha256, and redoes the rest. Files
+appear only when complete (temporary name, then rename), so a killed batch
+leaves no half-written file and resumes cleanly. A lost worker process
+costs only its job (retried up to MAX_ATTEMPTS times); SIGINT/SIGTERM stop
+the batch cleanly; workers die with their parent.
 """
 
 from __future__ import annotations
@@ -16,8 +20,10 @@ import hashlib
 import itertools
 import json
 import os
-import queue as queue_module
 import re
+import signal
+import sys
+import threading
 import time
 import tomllib
 import traceback
@@ -28,10 +34,13 @@ from typing import Any
 
 from . import __version__
 from .errors import InputError, SceneError, TreebakeError
-from .fileio import write_text
+from .fileio import job_lock, write_text
+from .fingerprint import code_fingerprint
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 QUALITY_NAMES = ("draft", "default", "final")
+MAX_ATTEMPTS = 3  # a job whose worker process dies is run at most this often
+DASK_WORKER_TIMEOUT = 120.0  # s without any Dask worker before the batch fails
 JOB_KEYS = {"name", "scene", "grammar", "seed", "seeds", "quality", "formats", "duration", "fps",
             "wind", "solver"}
 
@@ -65,8 +74,10 @@ class Job:
             files.append(Path(self.grammar))
         return files
 
-    def digest(self) -> str:
-        """Hash of the tool version, the settings and the inputs' content."""
+    def inputs_digest(self) -> str:
+        """Hash of the tool version, the settings and the inputs' content:
+        the bake's `scene_hash` (so a bake's bytes do not depend on the code
+        that made it beyond its motion)."""
         h = hashlib.sha256(f"treebake {__version__}\n".encode())
         h.update(json.dumps({k: v for k, v in asdict(self).items() if k != "name"},
                             sort_keys=True).encode())
@@ -74,6 +85,12 @@ class Job:
             h.update(path.name.encode())
             h.update(path.read_bytes())
         return h.hexdigest()
+
+    def digest(self) -> str:
+        """The resume hash: inputs_digest plus the package's code fingerprint,
+        so editing treebake itself reruns the jobs it could change."""
+        return hashlib.sha256(f"{self.inputs_digest()} code {code_fingerprint()}".encode()
+                              ).hexdigest()
 
 
 # ---------------------------------------------------------------------------
@@ -223,7 +240,7 @@ def _tables(file: str, raw: dict, key: str) -> list[dict]:
 @dataclass
 class JobResult:
     name: str
-    status: str  # "done", "skipped", "failed"
+    status: str  # "done", "skipped", "failed", "interrupted" (stopped by SIGINT/SIGTERM)
     seconds: float = 0.0
     message: str = ""
     files: list[str] = field(default_factory=list)
@@ -259,7 +276,7 @@ def scene_of(job: Job):
         raw["wind"].pop("beaufort", None)
     raw.update(overrides)
     return parse_scene(raw, file=job.scene or job.grammar, base=base,
-                       source_hash=job.digest())
+                       source_hash=job.inputs_digest())
 
 
 def _clean_stale(folder: Path) -> None:
@@ -269,16 +286,48 @@ def _clean_stale(folder: Path) -> None:
             tmp.unlink(missing_ok=True)
 
 
-def finished(job: Job, out: Path) -> bool:
-    """The job's outputs exist and were made from the same inputs."""
-    record = out / job.name / "job.json"
+def file_record(folder: Path, path: Path) -> dict:
+    """{path relative to the job folder, bytes, sha256} of one output."""
+    from .export import sha256
+
+    return {"path": path.resolve().relative_to(folder.resolve()).as_posix(),
+            "bytes": path.stat().st_size, "sha256": sha256(path)}
+
+
+def stale_reason(job: Job, out: Path) -> str | None:
+    """Why the job must be (re)done, or None if its outputs are complete:
+    job.json present, made by the same code from the same inputs, and every
+    recorded file still of its recorded size and sha256."""
+    from .export import sha256
+
+    folder = out / job.name
     try:
-        data = json.loads(record.read_text())
+        data = json.loads((folder / "job.json").read_text())
+    except FileNotFoundError:
+        return "not run yet"
     except (OSError, ValueError):
-        return False
+        return "job.json unreadable"
     if data.get("hash") != job.digest():
-        return False
-    return all((out / job.name / f).is_file() for f in data.get("files", []))
+        return "inputs, settings or treebake's code changed"
+    files = data.get("files")
+    if not isinstance(files, list) or not files or not all(isinstance(f, dict) for f in files):
+        return "job.json has no output checksums (older treebake)"
+    for f in files:
+        path = folder / str(f.get("path"))
+        try:
+            size = path.stat().st_size
+        except OSError:
+            return f"{f.get('path')} is missing"
+        if size != f.get("bytes"):
+            return f"{f.get('path')} is {size} bytes, recorded {f.get('bytes')}"
+        if sha256(path) != f.get("sha256"):
+            return f"{f.get('path')} does not match its recorded sha256"
+    return None
+
+
+def finished(job: Job, out: Path) -> bool:
+    """The job's outputs are complete and were made from the same inputs and code."""
+    return stale_reason(job, out) is None
 
 
 def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult:
@@ -291,29 +340,34 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
     root = Path(out)
     folder = root / job.name
     try:
-        if not force and finished(job, root):
-            return JobResult(job.name, "skipped", message="up to date")
-        _clean_stale(folder)
-        (folder / "job.json").unlink(missing_ok=True)
-        scene = scene_of(job)
-        tick = None
-        if progress is not None:
-            def tick(done, total, name=job.name):
-                progress(name, done, total)
-        bake = bake_scene(scene, solver=job.solver, progress=tick)
-        bake_path = save_bake(bake, folder / f"{job.name}.npz")
-        files = [bake_path]
-        exports = [f for f in job.formats if f != "npz"]
-        if exports:
-            report = export_bake(bake, root, job.name, ExportOptions(formats=tuple(exports)),
-                                 bake_path=bake_path)
-            files += report.files
-        rel = sorted({p.resolve().relative_to(folder.resolve()).as_posix() for p in files})
-        record = {"tool": f"treebake {__version__}", "job": asdict(job), "hash": job.digest(),
-                  "files": rel}
-        write_text(folder / "job.json", json.dumps(record, indent=2, sort_keys=True) + "\n")
-        return JobResult(job.name, "done", time.perf_counter() - start, "", rel,
-                         len(bake.times), sum(t.n_segments for t in bake.trees))
+        with job_lock(folder):
+            reason = "forced" if force else stale_reason(job, root)
+            if reason is None:
+                return JobResult(job.name, "skipped", message="up to date")
+            _clean_stale(folder)
+            (folder / "job.json").unlink(missing_ok=True)
+            scene = scene_of(job)
+            tick = None
+            if progress is not None:
+                def tick(done, total, name=job.name):
+                    progress(name, done, total)
+            bake = bake_scene(scene, solver=job.solver, progress=tick)
+            bake_path = save_bake(bake, folder / f"{job.name}.npz")
+            files = [bake_path]
+            exports = [f for f in job.formats if f != "npz"]
+            if exports:
+                report = export_bake(bake, root, job.name,
+                                     ExportOptions(formats=tuple(exports)), bake_path=bake_path)
+                files += report.files
+            records = sorted((file_record(folder, p) for p in set(files)),
+                             key=lambda r: r["path"])
+            record = {"tool": f"treebake {__version__}", "job": asdict(job),
+                      "hash": job.digest(), "files": records}
+            write_text(folder / "job.json", json.dumps(record, indent=2, sort_keys=True) + "\n")
+            redone = "" if reason in ("not run yet", "forced") else f"redone: {reason}"
+            return JobResult(job.name, "done", time.perf_counter() - start, redone,
+                             [r["path"] for r in records], len(bake.times),
+                             sum(t.n_segments for t in bake.trees))
     except TreebakeError as exc:
         return JobResult(job.name, "failed", time.perf_counter() - start, str(exc))
     except Exception as exc:  # noqa: BLE001 - a job reports any failure, never stops the batch
@@ -329,119 +383,348 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
 
 def run_batch(jobs: list[Job], out: str | Path, workers: int | None = None, force: bool = False,
               executor: str = "process", scheduler: str | None = None,
-              report: Callable[[str, Any], None] | None = None) -> list[JobResult]:
+              report: Callable[[str, Any], None] | None = None,
+              worker_timeout: float = DASK_WORKER_TIMEOUT) -> list[JobResult]:
     """Run the jobs; results in job order. `report(event, data)` receives
-    ("start", name), ("progress", (name, done, total)), ("end", JobResult)."""
-    out = str(Path(out))
+    ("workers", count actually running jobs), ("start", name),
+    ("progress", (name, done, total)), ("retry", (name, why)) and
+    ("end", JobResult). SIGINT/SIGTERM (main thread only) stop the batch:
+    no new job starts, running ones are stopped, and every job not finished
+    comes back as "interrupted". `worker_timeout`: s a Dask run may go
+    without any worker before its unfinished jobs fail."""
+    out = str(Path(out).resolve())  # here, on the client: a Dask worker's cwd is not ours
     report = report or (lambda event, data: None)
-    if executor == "dask":
-        return _run_dask(jobs, out, force, scheduler, report)
     workers = workers or os.cpu_count() or 1
-    if workers == 1:
-        results = []
-        for job in jobs:
-            report("start", job.name)
+    serial = executor != "dask" and min(workers, len(jobs)) <= 1
+    with _StopSignals(interrupt=serial) as stop:
+        if executor == "dask":
+            results = _run_dask(jobs, out, force, scheduler, report, stop, worker_timeout)
+        elif serial:
+            report("workers", 1)
+            results = _run_serial(jobs, out, force, report, stop)
+        else:
+            report("workers", min(workers, len(jobs)))
+            results = _run_processes(jobs, out, force, workers, report, stop)
+    why = f"not started: stopped by {stop.name}" if stop.name else "not started"
+    return [results.get(j.name) or JobResult(j.name, "interrupted", message=why) for j in jobs]
+
+
+class _StopSignals:
+    """SIGINT/SIGTERM while a batch runs: remember the signal (no new jobs
+    start); the serial runner also interrupts its running job. Installed
+    only in the main thread, restored afterwards."""
+
+    def __init__(self, interrupt: bool) -> None:
+        self.interrupt = interrupt
+        self.name: str | None = None
+        self._old: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        first = self.name is None
+        self.name = signal.Signals(signum).name
+        if self.interrupt and first:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> bool:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        return False
+
+    @property
+    def stopped(self) -> bool:
+        return self.name is not None
+
+
+def _run_serial(jobs, out, force, report, stop: _StopSignals) -> dict[str, JobResult]:
+    results: dict[str, JobResult] = {}
+    for job in jobs:
+        if stop.stopped:
+            break
+        report("start", job.name)
+        try:
             r = run_job(job, out, force, lambda *p: report("progress", p))
+        except KeyboardInterrupt:  # our signal handler, or Ctrl-C outside the main thread
+            r = JobResult(job.name, "interrupted",
+                          message=f"stopped by {stop.name or 'SIGINT'} while running")
+            results[job.name] = r
             report("end", r)
-            results.append(r)
-        return results
-    return _run_processes(jobs, out, force, workers, report)
+            break
+        results[job.name] = r
+        report("end", r)
+    return results
 
 
-def _run_processes(jobs, out, force, workers, report) -> list[JobResult]:
+@dataclass
+class _Worker:
+    """One worker process, its end of the pipe, and the job it runs."""
+
+    process: Any
+    conn: Any
+    job: Job | None = None
+
+
+def _run_processes(jobs, out, force, workers, report, stop: _StopSignals) -> dict[str, JobResult]:
+    """A pool of our own (not concurrent.futures, which fails every pending
+    job when one worker dies): each worker gets one job at a time over its
+    own pipe, so a worker that dies costs only the job it held, which is
+    retried in a fresh worker up to MAX_ATTEMPTS times."""
     import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from multiprocessing.connection import wait
 
     ctx = mp.get_context("spawn")  # no inherited pymunk/numpy state, same as a fresh run
-    manager = ctx.Manager()
-    queue = manager.Queue()
+    todo = list(jobs)
+    attempts: dict[str, int] = {}
     results: dict[str, JobResult] = {}
+    pool: list[_Worker] = []
+
+    def finish(r: JobResult) -> None:
+        results[r.name] = r
+        report("end", r)
+
+    def lost(w: _Worker) -> None:
+        w.process.join(timeout=2)
+        why = _exit_reason(w.process.exitcode)
+        pool.remove(w)
+        w.conn.close()
+        job, w.job = w.job, None
+        if job is None:
+            return
+        if attempts[job.name] < MAX_ATTEMPTS:
+            todo.insert(0, job)
+            report("retry", (job.name, f"worker process {why}; retrying"))
+        else:
+            finish(JobResult(job.name, "failed", message=f"worker process {why} "
+                                                         f"(tried {MAX_ATTEMPTS} times)"))
+
+    def collect(w: _Worker) -> None:
+        try:
+            while w.job is not None and w.conn.poll():
+                event, data = w.conn.recv()
+                if event == "end":
+                    w.job = None
+                    finish(data)
+                else:
+                    report(event, data)
+        except (EOFError, OSError):
+            pass  # the worker is gone: its sentinel says so below
+
     try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            pending = {pool.submit(_worker, job, out, force, queue): job for job in jobs}
-            started = set()
-            while pending:
-                done, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                _drain(queue, report, started)
-                for fut in done:
-                    job = pending.pop(fut)
-                    try:
-                        r = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - the worker process died
-                        r = JobResult(job.name, "failed", message=f"worker died: {exc}")
-                    results[job.name] = r
-                    report("end", r)
-            _drain(queue, report, started)
+        while True:
+            if not stop.stopped:
+                busy = sum(w.job is not None for w in pool)
+                while len(pool) < min(workers, busy + len(todo)):
+                    parent_end, child_end = ctx.Pipe()
+                    proc = ctx.Process(target=_worker_main, args=(child_end, os.getpid()),
+                                       name="treebake-worker", daemon=True)
+                    proc.start()
+                    child_end.close()
+                    pool.append(_Worker(proc, parent_end))
+                for w in list(pool):
+                    if w.job is None and todo:
+                        w.job = todo.pop(0)
+                        attempts[w.job.name] = attempts.get(w.job.name, 0) + 1
+                        report("start", w.job.name)
+                        try:
+                            w.conn.send((w.job, out, force))
+                        except OSError:
+                            lost(w)
+            running = [w for w in pool if w.job is not None]
+            if stop.stopped or (not running and not todo):
+                break
+            wait([w.conn for w in running] + [w.process.sentinel for w in running], timeout=0.5)
+            for w in running:
+                collect(w)
+                if w.job is not None and not w.process.is_alive():
+                    collect(w)  # a last message may have arrived just before it died
+                    if w.job is not None:
+                        lost(w)
     finally:
-        manager.shutdown()
-    return [results[j.name] for j in jobs]
+        for w in pool:
+            if w.job is not None:
+                results.setdefault(w.job.name, JobResult(
+                    w.job.name, "interrupted",
+                    message=f"stopped by {stop.name or 'an error'} while running"))
+                report("end", results[w.job.name])
+                w.process.terminate()  # SIGTERM: the job removes its temporary file
+            else:
+                try:
+                    w.conn.send(None)  # idle: exit
+                except OSError:
+                    pass
+        for w in pool:
+            w.process.join(timeout=10)
+            if w.process.is_alive():
+                w.process.kill()
+                w.process.join()
+            w.conn.close()
+    return results
 
 
-def _worker(job: Job, out: str, force: bool, queue) -> JobResult:
-    queue.put(("start", job.name))
-    last = [0.0]
+def _exit_reason(code: int | None) -> str:
+    if code is None:
+        return "stopped responding"
+    if code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        oom = " (out of memory? the kernel's OOM killer sends it)" if -code == signal.SIGKILL \
+            else ""
+        return f"was killed by {name}{oom}"
+    return f"exited with code {code}"
 
-    def progress(name, done, total):
-        now = time.perf_counter()
-        if now - last[0] > 0.25 or done >= total:
-            last[0] = now
-            queue.put(("progress", (name, done, total)))
 
-    return run_job(job, out, force, progress)
-
-
-def _drain(queue, report, started) -> None:
+def _worker_main(conn, parent_pid: int) -> None:
+    """A worker: run the jobs its pipe brings, until None or the pipe closes."""
+    _die_with_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the whole group:
+    # the parent decides what stops
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwinds: temporaries removed
     while True:
         try:
-            event, data = queue.get_nowait()
-        except queue_module.Empty:
+            message = conn.recv()
+        except (EOFError, OSError):
             return
-        if event == "start":
-            started.add(data)
-        report(event, data)
+        if message is None:
+            return
+        job, out, force = message
+        if os.environ.get("TREEBAKE_FAULT_KILL_JOB") == job.name:  # bench/faults.py, tests
+            os.kill(os.getpid(), signal.SIGKILL)
+        last = [0.0]
+
+        def progress(name, done, total):
+            now = time.monotonic()
+            if now - last[0] > 0.25 or done >= total:
+                last[0] = now
+                conn.send(("progress", (name, done, total)))
+
+        conn.send(("end", run_job(job, out, force, progress)))
 
 
-def _run_dask(jobs, out, force, scheduler, report) -> list[JobResult]:
+def _die_with_parent(parent_pid: int) -> None:
+    """A worker must not outlive its batch (re-parented to PID 1 it would
+    write on, then block forever). Linux: the kernel SIGKILLs it when the
+    parent dies (prctl PR_SET_PDEATHSIG); elsewhere, and as a second line,
+    a thread checks the parent pid every second."""
     try:
-        from distributed import Client, as_completed
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)  # 1: PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="treebake-parent-watch", daemon=True).start()
+
+
+def _run_dask(jobs, out, force, scheduler, report, stop: _StopSignals,
+              worker_timeout: float) -> dict[str, JobResult]:
+    try:
+        from distributed import Client
     except ImportError:
         raise InputError("--executor dask needs dask.distributed: "
                          "pip install 'treebake[dask]'") from None
     if not scheduler:
         raise InputError("--executor dask needs --scheduler ADDRESS (e.g. tcp://host:8786)")
+    if not worker_timeout > 0:
+        raise InputError(f"--worker-timeout must be > 0 s, got {worker_timeout}")
+    try:
+        client = Client(scheduler, timeout=30)
+    except OSError as exc:
+        raise TreebakeError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
     results: dict[str, JobResult] = {}
-    with Client(scheduler) as client:
-        futures = {client.submit(run_job, job, out, force, pure=False, key=f"treebake-{job.name}"):
-                   job for job in jobs}
+    with client:
+        most = _dask_workers(client)
+        if most == 0:
+            try:
+                client.wait_for_workers(1, timeout=worker_timeout)
+            except (TimeoutError, OSError):
+                raise TreebakeError(f"no Dask worker joined {scheduler} within "
+                                    f"{worker_timeout:g} s (--worker-timeout); start workers "
+                                    "with `dask worker ADDRESS --nthreads 1`") from None
+            most = _dask_workers(client)
+        report("workers", most)
+        futures = {client.submit(run_job, job, out, force, pure=False,
+                                 key=f"treebake-{job.name}"): job for job in jobs}
         for job in jobs:
             report("start", job.name)
-        for fut in as_completed(list(futures)):
-            job = futures[fut]
-            try:
-                r = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a lost worker fails its job only
-                r = JobResult(job.name, "failed", message=f"dask worker failed: {exc}")
-            results[job.name] = r
-            report("end", r)
-    return [results[j.name] for j in jobs]
+        pending = set(futures)
+        seen_worker = last_check = time.monotonic()
+        while pending and not stop.stopped:
+            ready = [f for f in pending if f.done()]
+            for fut in ready:
+                pending.discard(fut)
+                job = futures[fut]
+                try:
+                    r = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a lost worker fails its job only
+                    r = JobResult(job.name, "failed", message=f"dask worker failed: {exc}")
+                results[job.name] = r
+                report("end", r)
+            now = time.monotonic()
+            if not ready and now - last_check >= 1.0:
+                last_check = now
+                count = _dask_workers(client)
+                if count > most:
+                    most = count
+                    report("workers", most)
+                if count:
+                    seen_worker = now
+                elif now - seen_worker > worker_timeout:
+                    client.cancel(list(pending))
+                    for fut in pending:
+                        job = futures[fut]
+                        r = JobResult(job.name, "failed",
+                                      message=f"no Dask worker left for {worker_timeout:g} s "
+                                              "(--worker-timeout); rerun to resume")
+                        results[job.name] = r
+                        report("end", r)
+                    pending.clear()
+            if not ready:
+                time.sleep(0.2)
+        if pending:  # stopped by a signal
+            client.cancel(list(pending))
+    return results
+
+
+def _dask_workers(client) -> int:
+    try:
+        return len(client.scheduler_info(n_workers=-1).get("workers", {}))
+    except TypeError:  # older distributed: no n_workers argument
+        return len(client.scheduler_info().get("workers", {}))
 
 
 def summary(results: list[JobResult], wall: float, workers: int) -> dict:
-    """Machine-readable summary of a batch."""
+    """Machine-readable summary of a batch; `workers`: how many processes
+    (or Dask workers, the most seen) actually ran jobs."""
     return {
         "tool": f"treebake {__version__}", "jobs": len(results), "wall_seconds": round(wall, 3),
         "workers": workers,
         "done": sum(r.status == "done" for r in results),
         "skipped": sum(r.status == "skipped" for r in results),
         "failed": sum(r.status == "failed" for r in results),
+        "interrupted": sum(r.status == "interrupted" for r in results),
         "results": [{**asdict(r), "seconds": round(r.seconds, 3)} for r in results],
     }
 
 
 def format_table(results: list[JobResult]) -> str:
     width = max([len(r.name) for r in results] + [4])
-    lines = [f"{'job':<{width}}  {'status':<7} {'s':>7}  {'frames':>6} {'segments':>8}  message"]
+    lines = [f"{'job':<{width}}  {'status':<11} {'s':>7}  {'frames':>6} {'segments':>8}  message"]
     for r in results:
-        lines.append(f"{r.name:<{width}}  {r.status:<7} {r.seconds:>7.1f}  {r.frames:>6} "
+        lines.append(f"{r.name:<{width}}  {r.status:<11} {r.seconds:>7.1f}  {r.frames:>6} "
                      f"{r.segments:>8}  {r.message}")
     return "\n".join(lines)

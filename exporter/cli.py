@@ -10,8 +10,8 @@ import time
 from pathlib import Path
 
 from . import __version__
-from .errors import InputError, TreebakeError
-from .fileio import write_text
+from .errors import InputError, LimitError, TreebakeError
+from .fileio import check_writable, check_writable_file, write_text
 
 
 def _add_grammar_options(p: argparse.ArgumentParser) -> None:
@@ -21,6 +21,19 @@ def _add_grammar_options(p: argparse.ArgumentParser) -> None:
                    help="derivation steps (default: grammar's)")
     p.add_argument("--max-modules", type=int, default=None,
                    help="cap on the derived string length (default 2,000,000)")
+
+
+def _derive(grammar, args):
+    """derive() with the command's limits; a module-limit error names the
+    option that raises it (only derive and inspect have it)."""
+    from .lsystem import derive
+
+    try:
+        return derive(grammar, args.seed, args.iterations, _limits(args))
+    except LimitError as exc:
+        if "modules" not in str(exc):
+            raise
+        raise LimitError(f"{exc}, or raise --max-modules") from None
 
 
 def _limits(args):
@@ -34,10 +47,12 @@ def _limits(args):
 
 
 def cmd_derive(args) -> int:
-    from .lsystem import derive, format_modules, load_grammar
+    from .lsystem import format_modules, load_grammar
 
+    if args.output:
+        check_writable_file(args.output)
     grammar = load_grammar(args.grammar)
-    d = derive(grammar, args.seed, args.iterations, _limits(args))
+    d = _derive(grammar, args)
     text = format_modules(d.modules)
     if args.output:
         write_text(args.output, text + "\n")
@@ -78,15 +93,17 @@ def inspect_summary(model, derivation) -> dict:
 
 
 def cmd_inspect(args) -> int:
-    from .lsystem import derive, load_grammar
+    from .lsystem import load_grammar
     from .preview import model_preview
     from .turtle import interpret
 
+    if not 64 <= args.size <= 2048:
+        raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     grammar = load_grammar(args.grammar)
-    d = derive(grammar, args.seed, args.iterations, _limits(args))
+    out = check_writable(Path(args.out) / grammar.name)
+    d = _derive(grammar, args)
     model = interpret(d.modules, grammar, seed=d.seed)
     summary = inspect_summary(model, d)
-    out = Path(args.out) / grammar.name
     write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     image = model_preview(model, size=args.size)
     from .fileio import atomic_path
@@ -109,6 +126,13 @@ def load_job(path: str, args):
     from .scene import load_scene, parse_scene
 
     p = Path(path)
+    if p.suffix.lower() == ".npz":
+        raise InputError(f"{p} is a bake, not a scene: `treebake bake` takes a scene (.toml) or "
+                         f"a grammar (.lsys); to turn a bake into files use `treebake export {p}`"
+                         f" (or `treebake preview {p}`)")
+    if p.suffix.lower() not in (".toml", ".lsys"):
+        raise InputError(f"{p}: `treebake bake` takes a scene file (.toml) or a grammar "
+                         "(.lsys)")
     overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
                                    ("seed", args.seed), ("quality", args.quality),
                                    ("wind.speed", args.wind)) if v is not None}
@@ -135,16 +159,24 @@ def _parse_timestep(text: str) -> float:
     return value
 
 
+def _job_name(name: str) -> str:
+    if not name or any(c in name for c in "/\\") or name in (".", ".."):
+        raise InputError(f"job name {name!r} cannot be a folder name (--name)")
+    return name
+
+
 def cmd_bake(args) -> int:
+    import os
+
     from .bake import save_bake
+    from .export import check_options
+    from .fileio import job_lock
     from .pipeline import bake_scene
 
     scene = load_job(args.job, args)
-    out = Path(args.out) / (args.name or scene.name)
+    out = Path(args.out) / _job_name(args.name or scene.name)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     progress = None if args.quiet else _progress_bar("simulating")
-    import os
-
     workers = args.workers or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
@@ -154,14 +186,19 @@ def cmd_bake(args) -> int:
             raise InputError("--timestep is the full reference's step: use it with --solver full "
                              "(the planar LOD's steps come from --quality)")
         timestep = _parse_timestep(args.timestep)
-    bake = bake_scene(scene, solver=args.solver, log=log, progress=progress, workers=workers,
-                      timestep=timestep)
-    path = save_bake(bake, out / f"{out.name}.npz")
-    exported = None
     if args.format is None and scene.formats:
         args.format = ",".join(f for f in scene.formats if f != "npz")
-    if args.format:
-        exported = _run_export(bake, path, args.out, out.name, _export_options(args), args)
+    opts = None
+    if args.format is not None:  # checked now, not after the simulation
+        opts = _export_options(args, allow_none=True)
+        check_options(opts)
+    with job_lock(out):  # proves the folder writable; one run per job folder at a time
+        bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
+                          workers=workers, timestep=timestep)
+        path = save_bake(bake, out / f"{out.name}.npz")
+        exported = None
+        if opts is not None and opts.formats:
+            exported = _run_export(bake, path, args.out, out.name, opts, args)
     t = bake.timing
     summary = {"bake": str(path), "trees": len(bake.trees),
                "simulated": sum(1 for tb in bake.trees if not tb.static),
@@ -173,25 +210,50 @@ def cmd_bake(args) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
+        print(f"baked {_plural(summary['trees'], 'tree')} ({summary['simulated']} simulated, "
+              f"{_plural(summary['segments'], 'segment')}), {_plural(summary['frames'], 'frame')}"
+              f" in {summary['wall_seconds']:.1f} s -> {path}")
         if exported is not None:
             _print_export(exported)
-        print(f"baked {summary['trees']} trees ({summary['simulated']} simulated, "
-              f"{summary['segments']} segments), {summary['frames']} frames in "
-              f"{summary['wall_seconds']:.1f} s -> {path}")
     return 0
 
 
+PLAIN_PROGRESS_SECONDS = 5.0  # without a terminal: a plain progress line this often
+
+
+def _plain_interval() -> float:
+    """Seconds between plain progress lines (TREEBAKE_PROGRESS_SECONDS overrides)."""
+    import os
+
+    try:
+        return max(0.0, float(os.environ.get("TREEBAKE_PROGRESS_SECONDS", "")))
+    except ValueError:
+        return PLAIN_PROGRESS_SECONDS
+
+
 def _progress_bar(label: str):
-    """A one-line progress display on stderr (only when it is a terminal)."""
-    if not sys.stderr.isatty():
-        return None
+    """Progress on stderr: a redrawn bar on a terminal; elsewhere (logs, CI,
+    `| tee`) a plain line every few seconds and one at the end."""
     start = time.perf_counter()
+    tty = sys.stderr.isatty()
+    last = [start]
 
     def show(done: int, total: int) -> None:
-        width = 30
-        filled = int(width * done / max(total, 1))
         elapsed = time.perf_counter() - start
         eta = elapsed / max(done, 1) * (total - done)
+        if not tty:
+            if done >= total:
+                sys.stderr.write(f"{label}: {done}/{total} frames, done in {elapsed:.1f} s\n")
+            elif time.perf_counter() - last[0] >= _plain_interval():
+                last[0] = time.perf_counter()
+                sys.stderr.write(f"{label}: {done}/{total} frames "
+                                 f"({100 * done / max(total, 1):.0f} %), {eta:.0f} s left\n")
+            else:
+                return
+            sys.stderr.flush()
+            return
+        width = 30
+        filled = int(width * done / max(total, 1))
         sys.stderr.write(f"\r{label} [{'#' * filled}{'.' * (width - filled)}] "
                          f"{done}/{total} frames, {eta:4.0f} s left ")
         if done >= total:
@@ -205,27 +267,37 @@ def _add_export_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("export options")
     g.add_argument("--split", action="store_true", help="glTF: one file per tree")
     g.add_argument("--no-leaves", action="store_true", help="no leaf quads")
-    g.add_argument("--radial", type=int, default=8, help="vertices around a bark ring (3-64)")
-    g.add_argument("--rings", type=int, default=1, help="bark rings per segment (1-16)")
+    g.add_argument("--radial", type=int, default=8,
+                   help="vertices around a bark ring, 3-64 (default 8)")
+    g.add_argument("--rings", type=int, default=1, help="bark rings per segment, 1-16 (default 1)")
     g.add_argument("--position-tolerance", type=float, default=0.002,
                    help="keyframe reduction: worst joint/tip position error, m (default 0.002)")
     g.add_argument("--angle-tolerance", type=float, default=0.25,
                    help="keyframe reduction: worst joint rotation error, degrees (default 0.25)")
     g.add_argument("--no-reduce", action="store_true",
                    help="keep every frame of every channel that changes")
-    g.add_argument("--stride", type=int, default=1, help="OBJ sequences: every n-th frame")
-    g.add_argument("--size", type=int, default=256, help="preview panel size, px")
+    g.add_argument("--stride", type=int, default=1,
+                   help="OBJ sequences: every n-th frame (default 1)")
+    g.add_argument("--size", type=int, default=256, help="preview panel size, px (default 256)")
 
 
-def _export_options(args):
+def _export_options(args, allow_none: bool = False):
+    """ExportOptions from the command line; an empty --format is an error
+    (it used to export glb silently); allow_none: `npz` alone is fine
+    (bake: the bake is all that is wanted)."""
     import math
 
     from .exchange.anim import ReduceOptions
     from .exchange.mesh import MeshOptions
-    from .export import ExportOptions, parse_formats
+    from .export import FORMATS, ExportOptions, parse_formats
 
+    text = getattr(args, "format", None)
+    formats = parse_formats(text if text is not None else "glb")
+    if not formats and not (allow_none and text and text.strip(" ,").lower() == "npz"):
+        raise InputError(f"--format {text!r} names no export format; choose from: "
+                         f"{', '.join(FORMATS)} (comma-separated)")
     return ExportOptions(
-        formats=parse_formats(getattr(args, "format", None) or "glb"),
+        formats=formats,
         mesh=MeshOptions(radial=args.radial, rings=args.rings, leaves=not args.no_leaves),
         reduce=ReduceOptions(position_tolerance=args.position_tolerance,
                              angle_tolerance=math.radians(args.angle_tolerance),
@@ -234,16 +306,24 @@ def _export_options(args):
 
 
 def _stage_progress():
-    """Progress on stderr for export stages (only when it is a terminal)."""
-    if not sys.stderr.isatty():
-        return None
+    """Progress on stderr for export stages: a bar on a terminal, plain
+    lines (every few seconds and at each stage's end) elsewhere."""
     start = time.perf_counter()
+    tty = sys.stderr.isatty()
+    last = [start]
 
     def show(stage: str, done: int, total: int) -> None:
+        elapsed = time.perf_counter() - start
+        if not tty:
+            if done >= total or time.perf_counter() - last[0] >= _plain_interval():
+                last[0] = time.perf_counter()
+                sys.stderr.write(f"exporting {stage}: {done}/{total}, {elapsed:.1f} s\n")
+                sys.stderr.flush()
+            return
         width = 30
         filled = int(width * done / max(total, 1))
         sys.stderr.write(f"\rexporting {stage:<7} [{'#' * filled}{'.' * (width - filled)}] "
-                         f"{done}/{total}  {time.perf_counter() - start:5.1f} s ")
+                         f"{done}/{total}  {elapsed:5.1f} s ")
         if done >= total:
             sys.stderr.write("\n")
         sys.stderr.flush()
@@ -268,8 +348,9 @@ def _export_summary(report) -> dict:
 def _print_export(report) -> None:
     m = report.manifest
     a = m.get("animation")
-    print(f"exported {len(m['files'])} files, {m['total_bytes'] / 1e6:.1f} MB -> "
-          f"{report.folder} (manifest.json)")
+    names = [e["path"] for e in m["files"]] + ["manifest.json"]
+    print(f"exported {_plural(len(names), 'file')}, {m['total_bytes'] / 1e6:.1f} MB -> "
+          f"{report.folder}: {', '.join(names)}")
     if a and a.get("keys_full"):
         print(f"keyframes: {a['keys_written']:,} of {a['keys_full']:,} written "
               f"({100 * a['keys_kept_fraction']:.1f} %), {a['channels_written']:,} of "
@@ -279,13 +360,18 @@ def _print_export(report) -> None:
 
 def cmd_export(args) -> int:
     from .bake import load_bake
+    from .export import check_options
+    from .fileio import job_lock
 
     path = Path(args.bake)
     if not path.is_file():
         raise InputError(f"{path}: bake file not found")
     opts = _export_options(args)
+    check_options(opts)
     bake = load_bake(path)
-    report = _run_export(bake, path, args.out, args.name, opts, args)
+    name = _job_name(args.name or str(bake.meta.get("scene") or "bake"))
+    with job_lock(Path(args.out) / name):
+        report = _run_export(bake, path, args.out, name, opts, args)
     if args.json:
         print(json.dumps(_export_summary(report)))
     else:
@@ -303,10 +389,11 @@ def cmd_preview(args) -> int:
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     bake = load_bake(path)
-    name = args.name or str(bake.meta.get("scene") or path.stem)
+    name = _job_name(args.name or str(bake.meta.get("scene") or path.stem))
+    folder = check_writable(Path(args.out) / name)
     stage = None if args.quiet else _stage_progress()
     progress = None if stage is None else (lambda d, t: stage("preview", d, t))
-    files = write_previews(bake, Path(args.out) / name, name, args.size, progress=progress)
+    files = write_previews(bake, folder, name, args.size, progress=progress)
     if args.json:
         print(json.dumps({"files": [str(f) for f in files]}))
     else:
@@ -332,53 +419,87 @@ def cmd_batch(args) -> int:
     import os
 
     from .batch import format_table, load_jobs, run_batch, summary
+    from .fileio import check_writable, check_writable_file
 
     jobs = load_jobs(args.jobs_file)
     workers = args.jobs or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
-    show = None if args.json else _batch_display(len(jobs))
+    summary_path = Path(args.summary or Path(args.out) / "batch-summary.json")
+    check_writable(args.out)
+    check_writable_file(summary_path)
+    show = _batch_display(len(jobs), quiet=args.json)
     start = time.perf_counter()
     results = run_batch(jobs, args.out, workers, args.force, args.executor, args.scheduler,
-                        report=show)
-    data = summary(results, time.perf_counter() - start, workers)
-    write_text(Path(args.summary or Path(args.out) / "batch-summary.json"),
-               json.dumps(data, indent=2) + "\n")
+                        report=show, worker_timeout=args.worker_timeout)
+    data = summary(results, time.perf_counter() - start, show.workers)
+    write_text(summary_path, json.dumps(data, indent=2) + "\n")
     if args.json:
         print(json.dumps(data))
     else:
         print(format_table(results))
-        print(f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed "
-              f"in {data['wall_seconds']:.1f} s with {workers} worker(s)")
+        line = (f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed")
+        if data["interrupted"]:
+            line += f", {data['interrupted']} interrupted"
+        print(f"{line} in {data['wall_seconds']:.1f} s with {_plural(data['workers'], 'worker')}"
+              f"; summary: {summary_path}")
+    if data["interrupted"]:
+        print("treebake: interrupted; rerun the same command to resume", file=sys.stderr)
+        return 130
     return 1 if data["failed"] else 0
 
 
-def _batch_display(total: int):
-    """Progress of a batch on stderr: one line per finished job, and on a
-    terminal a live line with every running job's frame count."""
-    tty = sys.stderr.isatty()
-    running: dict[str, str] = {}
-    finished = [0]
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
-    def show(event: str, data) -> None:
+
+class _batch_display:
+    """Progress of a batch on stderr: one line per finished (or retried) job;
+    on a terminal a live line with every running job's frame count, else
+    that status as a plain line every PLAIN_PROGRESS_SECONDS. Remembers
+    the most workers the run reported (the summary's count)."""
+
+    def __init__(self, total: int, quiet: bool = False) -> None:
+        self.total, self.quiet = total, quiet
+        self.tty = sys.stderr.isatty()
+        self.running: dict[str, str] = {}
+        self.finished = 0
+        self.workers = 0
+        self.last_plain = time.monotonic()
+
+    def __call__(self, event: str, data) -> None:
+        if event == "workers":
+            self.workers = max(self.workers, int(data))
+            return
         if event == "start":
-            running[data] = "starting"
+            self.running[data] = "starting"
         elif event == "progress":
             name, done, frames = data
-            running[name] = f"{done}/{frames}"
+            self.running[name] = f"{done}/{frames}"
+        elif event == "retry":
+            self._line(f"[{self.finished}/{self.total}] {data[0]}: {data[1]}")
         elif event == "end":
-            running.pop(data.name, None)
-            finished[0] += 1
-            line = f"[{finished[0]}/{total}] {data.name}: {data.status}"
+            self.running.pop(data.name, None)
+            self.finished += 1
+            line = f"[{self.finished}/{self.total}] {data.name}: {data.status}"
             if data.message:
                 line += f" ({data.message})"
-            sys.stderr.write(("\r\033[K" if tty else "") + line + "\n")
-        if tty and running:
-            live = "  ".join(f"{k} {v}" for k, v in sorted(running.items()))
-            sys.stderr.write(f"\r\033[K[{finished[0]}/{total}] {live}"[:200])
-        sys.stderr.flush()
+            self._line(line)
+        if self.quiet or not self.running:
+            return
+        live = "  ".join(f"{k} {v}" for k, v in sorted(self.running.items()))
+        if self.tty:
+            sys.stderr.write(f"\r\033[K[{self.finished}/{self.total}] {live}"[:200])
+            sys.stderr.flush()
+        elif time.monotonic() - self.last_plain >= _plain_interval():
+            self.last_plain = time.monotonic()
+            self._line(f"[{self.finished}/{self.total}] running: {live}"[:400])
 
-    return show
+    def _line(self, text: str) -> None:
+        if self.quiet:
+            return
+        sys.stderr.write(("\r\033[K" if self.tty else "") + text + "\n")
+        sys.stderr.flush()
 
 
 def cmd_sway(args) -> int:
@@ -462,7 +583,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "preview.png (front and side) into OUT/<name>/.")
     _add_grammar_options(p)
     p.add_argument("--out", default="out", help="output folder (default: out)")
-    p.add_argument("--size", type=int, default=512, help="preview panel size in pixels")
+    p.add_argument("--size", type=int, default=512,
+                   help="preview panel size, px, 64-2048 (default 512)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_inspect)
 
@@ -478,10 +600,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timestep", metavar="SECONDS",
                    help="the full reference's step, e.g. 1/480 (default 1/2000)")
     p.add_argument("--quality", choices=("draft", "default", "final"),
-                   help="override the scene's quality level")
-    p.add_argument("--duration", type=float, help="override the duration, s")
-    p.add_argument("--fps", type=float, help="override the frame rate, frames/s")
-    p.add_argument("--seed", type=int, help="override the seed")
+                   help="override the scene's quality level (default: the scene's, else "
+                        "default)")
+    p.add_argument("--duration", type=float, help="override the duration, s (default: the "
+                                                   "scene's; grammar jobs 10)")
+    p.add_argument("--fps", type=float, help="override the frame rate, frames/s (default: the "
+                                              "scene's; grammar jobs 24)")
+    p.add_argument("--seed", type=int, help="override the seed (default: the scene's)")
     p.add_argument("--wind", type=float, help="wind speed at 10 m, m/s (grammar jobs: "
                                                "default 6.7)")
     p.add_argument("--workers", type=int, default=None,
@@ -532,7 +657,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="largest allowed position difference, m (default 0.001)")
     p.add_argument("--angle-tolerance", type=float, default=0.1,
                    help="largest allowed rotation difference, degrees (default 0.1)")
-    p.add_argument("--worst", type=int, default=5, help="how many worst segments to list")
+    p.add_argument("--worst", type=int, default=5,
+                   help="how many worst segments to list (default 5)")
     p.add_argument("--json", action="store_true", help="the report as JSON")
     p.add_argument("--plot", help="write a PNG of the worst segments' error over time")
     p.set_defaults(func=cmd_diff)
@@ -549,18 +675,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--executor", choices=("process", "dask"), default="process",
                    help="process: local worker processes (default); dask: a Dask cluster")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    p.add_argument("--worker-timeout", type=float, default=120.0, metavar="SECONDS",
+                   help="Dask: fail the unfinished jobs after this long without any worker "
+                        "(default 120)")
     p.add_argument("--summary", help="summary JSON path (default: OUT/batch-summary.json)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_batch)
 
     p = sub.add_parser("sway", help="pull-and-release test: first sway frequency and damping",
                        description="Pull a tree's main stem at 0.6 of its height until the top "
-                                   "moves 1 %% of the height, release it in still air, and "
+                                   "moves 1 % of the height, release it in still air, and "
                                    "measure the first sway frequency and damping ratio (the "
                                    "field method).")
     p.add_argument("grammar", help="grammar file (.lsys)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
-    p.add_argument("--quality", choices=("draft", "default", "final"), default="default")
+    p.add_argument("--quality", choices=("draft", "default", "final"), default="default",
+                   help="simulation quality level (default: default)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_sway)
 
@@ -570,8 +700,11 @@ def build_parser() -> argparse.ArgumentParser:
                                    "reference at coarser steps; write OUT/report.md, "
                                    "report.json and plot.png (error against cost).")
     p.add_argument("--out", default="out/accuracy", help="output folder (default: out/accuracy)")
-    p.add_argument("--species", nargs="*", help="species (default: sapling broadleaf conifer)")
-    p.add_argument("--scenarios", nargs="*", help="scenarios (default: all)")
+    p.add_argument("--species", nargs="*", metavar="NAME",
+                   help=f"species, any of: {', '.join(ACCURACY_SPECIES)} (default: sapling "
+                        "broadleaf conifer)")
+    p.add_argument("--scenarios", nargs="*", metavar="NAME",
+                   help=f"scenarios, any of: {', '.join(ACCURACY_SCENARIOS)} (default: all)")
     p.add_argument("--duration", type=float, default=5.0, help="seconds per case (default 5)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
@@ -587,13 +720,63 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/stability", help="output folder (default: "
                                                           "out/stability)")
     p.add_argument("--quick", action="store_true", help="leave out the 10-minute runs")
-    p.add_argument("--solver", choices=("planar", "full", "both"), default="both")
-    p.add_argument("--case", nargs="*", help="only these cases")
+    p.add_argument("--solver", choices=("planar", "full", "both"), default="both",
+                   help="planar: the LOD; full: the MuJoCo reference; both (default)")
+    p.add_argument("--case", nargs="*", metavar="NAME",
+                   help="only these cases (quote names with spaces): "
+                        f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the "
+                        "last two only without --quick)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_stability)
 
+    for name, sp in sub.choices.items():
+        sp.formatter_class = _HelpFormatter
+        sp.epilog = "examples:\n" + EXAMPLES[name]
     return parser
+
+
+# names listed in help pages without importing the heavy modules on every
+# start; tests/test_cli_errors.py checks them against accuracy.py and stress.py
+ACCURACY_SPECIES = ("sapling", "palm", "broadleaf", "conifer", "oak")
+ACCURACY_SCENARIOS = ("calm", "breeze", "gusty", "gale", "boxes", "explosion")
+STABILITY_CASES = ("stiff x1", "stiff x100", "stiff x10000", "mass 1:10^2", "mass 1:10^4",
+                   "cone 0.5 deg", "cone 5 deg", "cone 90 deg", "overlapping",
+                   "near-zero segments", "wind 45 m/s", "wind 70 m/s", "blast 2 kg at 6 m",
+                   "blast 50 kg at 5 m", "blast 500 kg at 6 m", "10 min gusty", "10 min calm")
+
+EXAMPLES = {
+    "derive": "  treebake derive grammars/sapling.lsys --stats-only\n"
+              "  treebake derive grammars/oak.lsys -n 4 -o oak.txt\n",
+    "inspect": "  treebake inspect grammars/oak.lsys            # out/oak/summary.json, "
+               "preview.png\n  treebake inspect grammars/palm.lsys --json --size 256\n",
+    "bake": "  treebake bake presets/demo.toml --format glb   # out/demo/demo.npz, demo.glb\n"
+            "  treebake bake grammars/sapling.lsys --duration 4 --wind 12 --quality draft\n"
+            "  treebake bake presets/gale.toml --solver full --timestep 1/480 --name gale-ref\n",
+    "export": "  treebake export out/demo/demo.npz --format glb,usd\n"
+              "  treebake export out/demo/demo.npz --format obj --stride 2 --name demo-obj\n",
+    "preview": "  treebake preview out/demo/demo.npz --size 384\n",
+    "diff": "  treebake diff out/before/oak/oak.npz out/after/oak/oak.npz\n"
+            "  treebake diff out/demo/demo.glb out/demo/demo.npz   # an export vs its bake\n"
+            "  treebake diff a.npz b.npz --json --plot worst.png\n",
+    "batch": "  treebake batch jobs.toml --out out/shots -j 2\n"
+             "  treebake batch jobs.toml --out /shared/bakes --executor dask "
+             "--scheduler tcp://head:8786\n",
+    "sway": "  treebake sway grammars/oak.lsys\n"
+            "  treebake sway grammars/spruce.lsys --quality final --json\n",
+    "accuracy": "  treebake accuracy --species sapling --scenarios breeze gale --duration 2\n",
+    "stability": "  treebake stability --quick --solver planar\n"
+                 "  treebake stability --case 'stiff x100' 'wind 70 m/s'\n",
+}
+
+
+class _HelpFormatter(argparse.HelpFormatter):
+    """Wraps descriptions as usual; keeps the examples epilog as written."""
+
+    def _fill_text(self, text, width, indent):
+        if text.startswith("examples:"):
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -605,15 +788,35 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         code = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler below
     except TreebakeError as exc:
         print(f"treebake: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("treebake: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `treebake diff ... | head`: the reader left; not an error of ours
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, what a shell reports for a process killed by it
+    except OSError as exc:  # disk full, a folder removed under us, ...: no traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"treebake: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     if getattr(args, "verbose", False):
         print(f"done in {time.perf_counter() - start:.2f} s", file=sys.stderr)
     return code
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush cannot
+    raise BrokenPipeError again at exit."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

@@ -7,6 +7,13 @@ segment (m, and % of the tree's height) and the rotation error (degrees).
 The report gives the maximum and RMS, the first frame past the tolerance,
 the worst segments by limb path, and whether the difference is only
 float32 round-off ("noise").
+
+An exported glTF is its bake after keyframe reduction, which may move any
+joint or tip by up to the tolerances the file declares
+(asset.extras.treebake.reduction): those are added to the user's
+tolerances (and the report says so), so a glb and its own bake compare as
+the same. A file listed in a manifest.json beside it must still match the
+sha256 recorded there: a damaged or edited export is an error, not a diff.
 """
 
 from __future__ import annotations
@@ -53,8 +60,11 @@ class DiffReport:
     worst: list[SegmentError]
     noise: bool  # everything within float32 round-off
     within: bool  # within the tolerances
-    position_tolerance: float
-    angle_tolerance: float
+    position_tolerance: float  # m, the user's
+    angle_tolerance: float  # degrees, the user's
+    position_allowance: float = 0.0  # m, added for keyframe reduction declared by glTF inputs
+    angle_allowance: float = 0.0  # degrees, likewise
+    allowance_note: str = ""  # where the allowance comes from
     curves: dict = field(default_factory=dict)  # worst segments' error per frame, for plots
 
     def as_dict(self) -> dict:
@@ -64,13 +74,55 @@ class DiffReport:
 
 
 def load_any(path: str | Path) -> Bake:
-    """A bake (.npz) or an exported glTF (.glb/.gltf) read back as a bake."""
+    """A bake (.npz) or an exported glTF (.glb/.gltf) read back as a bake;
+    a file listed in a manifest.json beside it is checked against its sha256."""
     p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: file not found")
     if p.suffix.lower() in (".glb", ".gltf"):
         from .exchange.gltf_read import read_gltf_bake
 
+        verify_against_manifest(p)
         return read_gltf_bake(p)
     return load_bake(p)
+
+
+def verify_against_manifest(path: Path) -> None:
+    """Raise InputError if `path` is listed in the manifest.json of its folder
+    with another size or sha256 (damaged or edited since the export)."""
+    import json
+
+    from .export import sha256
+
+    manifest = path.parent / "manifest.json"
+    try:
+        files = json.loads(manifest.read_text(encoding="utf-8")).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return  # no (readable) manifest: the structure checks still apply
+    for entry in files if isinstance(files, list) else []:
+        if isinstance(entry, dict) and entry.get("path") == path.name:
+            if path.stat().st_size != entry.get("bytes") or sha256(path) != entry.get("sha256"):
+                raise InputError(f"{path}: does not match the size and sha256 recorded in "
+                                 f"{manifest} (damaged or edited since the export); "
+                                 "re-export it")
+            return
+
+
+def reduction_allowance(*bakes: Bake) -> tuple[float, float, str]:
+    """(m, degrees, note): the keyframe-reduction tolerances the inputs
+    declare (glTF files read back), summed: each may be that far from its
+    bake."""
+    pos = ang = 0.0
+    names = []
+    for b in bakes:
+        r = b.meta.get("reduction")
+        if isinstance(r, dict):
+            pos += float(r.get("position_m", 0.0))
+            ang += float(r.get("angle_deg", 0.0))
+            names.append(Path(str(b.meta.get("source", "glTF"))).name)
+    note = (f"keyframe reduction declared by {', '.join(names)}" if names and (pos or ang)
+            else "")
+    return pos, ang, note
 
 
 def check_topology(a: Bake, b: Bake) -> None:
@@ -103,10 +155,15 @@ def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, n
     """Position error (F, S) m (worse of the two segment ends) and rotation
     error (F, S) degrees; static trees are held at their one frame."""
     segs = np.arange(ta.n_segments)
+    # segments whose tip one side does not know (a glTF without tips): compare bases
+    tipless = np.array(sorted(set(ta.info.get("tipless", [])) | set(tb.info.get("tipless", []))),
+                       dtype=np.int64)
 
     def ends(t: TreeBake) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         base = t.positions.astype(float)
         tip = segment_ends(t, segs)
+        if len(tipless):
+            tip[:, tipless] = base[:, tipless]
         rot = t.rotations.astype(float)
         if t.positions.shape[0] == 1 and frames > 1:
             base, tip, rot = (np.repeat(x, frames, axis=0) for x in (base, tip, rot))
@@ -122,8 +179,12 @@ def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, n
 
 def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
                angle_tolerance: float = 0.1, worst: int = 5) -> DiffReport:
-    """Compare two bakes of the same trees. Tolerances: metres and degrees."""
+    """Compare two bakes of the same trees. Tolerances: metres and degrees,
+    to which the keyframe-reduction tolerances glTF inputs declare are added."""
     check_topology(a, b)
+    allow_pos, allow_ang, note = reduction_allowance(a, b)
+    user_pos, user_ang = position_tolerance, angle_tolerance
+    position_tolerance, angle_tolerance = user_pos + allow_pos, user_ang + allow_ang
     frames = len(a.times)
     pos_all, ang_all, pct_all, rows = [], [], [], []
     scale = 1.0
@@ -158,8 +219,9 @@ def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
         rms_position=float(np.sqrt(np.mean(pos**2))), max_angle=float(ang.max()),
         rms_angle=float(np.sqrt(np.mean(ang**2))), first_frame=first,
         first_time=float(a.times[first]) if first is not None else None, worst=worst_rows,
-        noise=noise, within=first is None, position_tolerance=position_tolerance,
-        angle_tolerance=angle_tolerance, curves=curves)
+        noise=noise, within=first is None, position_tolerance=user_pos,
+        angle_tolerance=user_ang, curves=curves, position_allowance=allow_pos,
+        angle_allowance=allow_ang, allowance_note=note)
 
 
 def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
@@ -174,7 +236,9 @@ def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
         verdict = "DIFFERENT"
     lines = [f"{name_a} vs {name_b}: {verdict}",
              (f"  {r.segments} segments x {r.frames} frames; tolerance "
-              f"{r.position_tolerance:g} m, {r.angle_tolerance:g} deg"),
+              f"{r.position_tolerance:g} m, {r.angle_tolerance:g} deg" +
+              (f" (+ {r.position_allowance:g} m, {r.angle_allowance:g} deg: "
+               f"{r.allowance_note})" if r.allowance_note else "")),
              (f"  position: max {r.max_position:.3g} m ({r.max_position_percent:.3g} % of "
               f"height), rms {r.rms_position:.3g} m"),
              f"  rotation: max {r.max_angle:.3g} deg, rms {r.rms_angle:.3g} deg"]
@@ -203,8 +267,8 @@ def plot_report(r: DiffReport, times: np.ndarray, path: str | Path) -> Path:
     for label, (p, g) in r.curves.items():
         top.plot(times, p, label=label)
         bottom.plot(times, g, label=label)
-    top.axhline(r.position_tolerance, color="0.5", ls="--", lw=0.8)
-    bottom.axhline(r.angle_tolerance, color="0.5", ls="--", lw=0.8)
+    top.axhline(r.position_tolerance + r.position_allowance, color="0.5", ls="--", lw=0.8)
+    bottom.axhline(r.angle_tolerance + r.angle_allowance, color="0.5", ls="--", lw=0.8)
     top.set_ylabel("position error, m")
     bottom.set_ylabel("rotation error, deg")
     bottom.set_xlabel("time, s")

@@ -30,6 +30,16 @@ class GrammarError(InputError):
         return f"{self.file}:{self.line}:{self.col}: {self.message}"
 
 
+class OutputError(InputError):
+    """An output path cannot be written (missing permission, a file where a
+    folder should be, read-only file system): exit code 2, found before any
+    expensive work."""
+
+
+class BusyError(TreebakeError):
+    """Another treebake run holds the job folder's lock: exit code 1."""
+
+
 class LimitError(InputError):
     """A derivation or size limit was hit (module count, memory, iterations)."""
 
@@ -44,6 +54,8 @@ class SceneError(InputError):
         super().__init__(str(self))
 
     def __str__(self) -> str:
+        if self.message.startswith("= "):  # "duration = -5 is out of range", not "duration: = -5"
+            return f"{self.file}: {self.key} {self.message}"
         return f"{self.file}: {self.key}: {self.message}"
 
 

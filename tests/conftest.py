@@ -1,3 +1,4 @@
+import os
 from pathlib import Path
 
 import pytest
@@ -10,3 +11,31 @@ PRESETS = ROOT / "presets"
 @pytest.fixture(scope="session")
 def root() -> Path:
     return ROOT
+
+
+# TREEBAKE_REQUIRE_TOOLS=1 (CI): a skipped test proves nothing, so every skip
+# (an importorskip of mujoco, pxr or distributed, a missing validator, a
+# pytest.skip anywhere, at collection or at run time) becomes a failure.
+REQUIRE_TOOLS = os.environ.get("TREEBAKE_REQUIRE_TOOLS") == "1"
+
+
+def _fail_skip(report) -> None:
+    reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+    report.outcome = "failed"
+    report.longrepr = f"skipped, but TREEBAKE_REQUIRE_TOOLS=1 forbids skips: {reason}"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if REQUIRE_TOOLS and report.skipped and not hasattr(report, "wasxfail"):
+        _fail_skip(report)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    outcome = yield
+    report = outcome.get_result()
+    if REQUIRE_TOOLS and report.skipped:
+        _fail_skip(report)

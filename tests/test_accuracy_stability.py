@@ -24,8 +24,10 @@ def test_default_quality_follows_the_reference(sapling_breeze):
     assert d.rms_position_pct < 0.05
     assert d.max_position_pct < 0.3
     assert d.rms_angle_deg < 0.2
-    # the sway frequency is the reference's (full run: 1.00)
-    assert d.frequency_ratio == pytest.approx(1.0, abs=0.05)
+    # No frequency-ratio check here: a 2 s record resolves 1/2 s = 0.5 Hz, 29 % of
+    # the sapling's 1.7 Hz (the 8x zero-padded spectrum's 3.6 % bins only
+    # interpolate), so +/-5 % could not fail. A 5 % frequency error would drift
+    # 0.17 of a cycle in 2 s: far past the RMS bound above, which is the check.
     # the split adds up: the model part and the step part bound the total
     assert d.rms_position_pct <= d.model_rms_pct + d.step_rms_pct + 1e-9
 
@@ -60,6 +62,9 @@ def test_stress_case(name, solver):
     case = next(c for c in cases(long=False) if c.name == name)
     r = run(case, solver)
     assert r.finite, r.error
+    # the tree moved: a tree wrongly baked as static (one frame) has spin 0 and
+    # passes every bound below (planar runs: 0.0033 rad/s at least, stiff x10000)
+    assert r.spin > 1e-4
     assert r.energy_growth <= ENERGY_TOLERANCE  # no perpetual motion: energy never grows
     assert r.gap <= GAP_TOLERANCE  # joints hold (the reference's cannot separate: 0)
     if solver == "full":

@@ -73,7 +73,7 @@ def test_trees_out_of_the_blast_stay_static(root):
 def test_not_a_bake_is_a_clear_error(tmp_path):
     junk = tmp_path / "x.npz"
     junk.write_bytes(b"not a zip")
-    with pytest.raises(InputError, match="not a readable treebake bake"):
+    with pytest.raises(InputError, match="not a treebake bake"):
         load_bake(junk)
 
 

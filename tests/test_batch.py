@@ -66,7 +66,7 @@ seeds = [1, 2]
         with pytest.raises(SceneError, match="plain name"):
             load_jobs(job_file(tmp_path, root, f'[[job]]\nname = "{bad}"\n'
                                                f'grammar = "ROOT/{SAPLING}"\n'))
-    with pytest.raises(SceneError, match=r"job\[0\]\.duration: = -1"):
+    with pytest.raises(SceneError, match=r"job\[0\]\.duration = -1 is out of range"):
         load_jobs(job_file(tmp_path, root, f'[[job]]\ngrammar = "ROOT/{SAPLING}"\n'
                                            "duration = -1\n"))
     with pytest.raises(SceneError, match="two jobs are named"):
@@ -87,7 +87,8 @@ def test_a_broken_job_does_not_stop_the_others(tmp_path, root):
     assert "bad.lsys" in broken.message and "division" in broken.message
     for name in "abc":
         record = json.loads((out / name / "job.json").read_text())
-        assert f"{name}.glb" in record["files"] and f"{name}.npz" in record["files"]
+        paths = {f["path"] for f in record["files"]}
+        assert f"{name}.glb" in paths and f"{name}.npz" in paths
     assert not (out / "broken" / "job.json").exists()
     # a rerun skips what is done and tries the broken one again
     again = {r.name: r.status for r in run_batch(jobs, out, workers=1)}
@@ -150,3 +151,252 @@ def test_dask_local_cluster_runs_the_same_jobs(tmp_path, root):
                             scheduler=cluster.scheduler_address)
     assert [r.status for r in results] == ["done", "done"]
     assert tree_bytes(tmp_path / "dask") == tree_bytes(tmp_path / "local")
+
+
+# ---------------------------------------------------------------------------
+# faults: damaged outputs, code changes, lost workers, signals, locks, Dask
+
+ONE = """
+[defaults]
+duration = 0.4
+fps = 12
+quality = "draft"
+formats = ["glb"]
+
+[[job]]
+name = "a"
+grammar = "ROOT/grammars/sapling.lsys"
+seed = 1
+"""
+
+
+def test_resume_redoes_damaged_outputs_and_records_checksums(tmp_path, root):
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    out = tmp_path / "out"
+    assert run_batch(jobs, out, workers=1)[0].status == "done"
+    good = tree_bytes(out)
+    record = json.loads((out / "a" / "job.json").read_text())
+    import hashlib
+
+    for entry in record["files"]:  # every output's size and sha256, checked independently
+        data = (out / "a" / entry["path"]).read_bytes()
+        assert entry["bytes"] == len(data) and entry["sha256"] == hashlib.sha256(data).hexdigest()
+    assert {e["path"] for e in record["files"]} == {"a.npz", "a.glb", "manifest.json"}
+    (out / "a" / "a.npz").write_bytes(b"")  # blanked, job.json intact
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done" and "a.npz is 0 bytes" in r.message
+    glb = out / "a" / "a.glb"
+    glb.write_bytes(glb.read_bytes()[:1000])  # truncated
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done" and "a.glb" in r.message
+    data = bytearray(glb.read_bytes())  # same size, 10 bytes overwritten
+    data[5000:5010] = b"\xab" * 10
+    glb.write_bytes(bytes(data))
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done" and "sha256" in r.message
+    assert run_batch(jobs, out, workers=1)[0].status == "skipped"
+    assert tree_bytes(out) == good
+
+
+def test_a_change_of_treebake_code_reruns_jobs(tmp_path, root, monkeypatch):
+    import treebake.batch as batch
+
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    out = tmp_path / "out"
+    assert run_batch(jobs, out, workers=1)[0].status == "done"
+    assert run_batch(jobs, out, workers=1)[0].status == "skipped"
+    monkeypatch.setattr(batch, "code_fingerprint", lambda: "0" * 64)  # as if a .py changed
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done" and "code" in r.message
+
+
+def test_the_code_fingerprint_covers_every_module():
+    from treebake import fingerprint
+
+    files = {p.relative_to(fingerprint.PACKAGE).as_posix()
+             for p in fingerprint.PACKAGE.rglob("*.py")}
+    assert {"batch.py", "sim/planar.py", "exchange/gltf.py", "lsystem/derive.py"} <= files
+    assert len(fingerprint.code_fingerprint()) == 64
+
+
+SLOW_JOBS = """
+[defaults]
+duration = 3.0
+fps = 24
+quality = "draft"
+formats = ["npz"]
+
+[[job]]
+name = "a"
+grammar = "ROOT/grammars/sapling.lsys"
+seed = 1
+
+[[job]]
+name = "b"
+grammar = "ROOT/grammars/sapling.lsys"
+seed = 2
+
+[[job]]
+name = "c"
+grammar = "ROOT/grammars/sapling.lsys"
+seed = 3
+
+[[job]]
+name = "d"
+grammar = "ROOT/grammars/sapling.lsys"
+seed = 4
+"""
+
+
+def _workers_of(pid: int) -> list[int]:
+    """Pids of the batch's worker processes (children running spawn_main)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            children = (task / "children").read_text().split()
+        except OSError:
+            continue
+        for c in children:
+            try:
+                cmd = Path(f"/proc/{c}/cmdline").read_bytes()
+            except OSError:
+                continue
+            if b"spawn_main" in cmd:
+                found.append(int(c))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _start_batch(tmp_path, root, body, *extra, env=None):
+    jobs_path = job_file(tmp_path, root, body)
+    cmd = [sys.executable, "-m", "treebake.cli", "batch", str(jobs_path), "--out",
+           str(tmp_path / "out"), *extra]
+    full_env = {**os.environ, "TREEBAKE_PROGRESS_SECONDS": "0", **(env or {})}
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=full_env, start_new_session=True)
+
+
+def _busy_workers(proc, count: int, timeout: float = 120) -> list[int]:
+    deadline = time.time() + timeout
+    while True:
+        assert proc.poll() is None, proc.communicate()
+        pids = _workers_of(proc.pid)
+        if len(pids) >= count:
+            return pids
+        assert time.time() < deadline, "workers did not start"
+        time.sleep(0.1)
+
+
+def _wait_running(tmp_path, timeout: float = 120) -> None:
+    """Until some job is under way (its stale temporaries or lock appear)."""
+    deadline = time.time() + timeout
+    while not any((tmp_path / "out").glob("*/.treebake.lock")):
+        assert time.time() < deadline
+        time.sleep(0.05)
+    time.sleep(1.0)  # into the simulation
+
+
+def test_kill_9_of_one_worker_retries_only_its_job(tmp_path, root):
+    proc = _start_batch(tmp_path, root, SLOW_JOBS, "--jobs", "2", "--json")
+    _wait_running(tmp_path)
+    victim = _busy_workers(proc, 2)[0]
+    os.kill(victim, signal.SIGKILL)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    summary = json.loads(out)
+    assert [r["status"] for r in summary["results"]] == ["done"] * 4
+    assert summary["workers"] == 2
+
+
+def test_a_job_whose_worker_always_dies_fails_alone(tmp_path, root):
+    # fault injection: the worker SIGKILLs itself when it starts job "b"
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 0.5"),
+                        "--jobs", "2", "--json", env={"TREEBAKE_FAULT_KILL_JOB": "b"})
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1, err
+    status = {r["name"]: (r["status"], r["message"]) for r in json.loads(out)["results"]}
+    assert {k: v[0] for k, v in status.items()} == {"a": "done", "b": "failed", "c": "done",
+                                                  "d": "done"}
+    assert "killed by SIGKILL" in status["b"][1] and "tried 3 times" in status["b"][1]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_sigint_or_sigterm_stops_cleanly_with_a_summary(tmp_path, root, sig):
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 20.0"),
+                        "--jobs", "2")
+    _wait_running(tmp_path)
+    workers = _busy_workers(proc, 2)
+    started = time.time()
+    os.kill(proc.pid, sig)  # the main process only, as a farm manager or `kill` does
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert time.time() - started < 30  # did not run the queued jobs on
+    assert "Traceback" not in err
+    summary = json.loads((tmp_path / "out" / "batch-summary.json").read_text())
+    assert summary["interrupted"] == 4 and summary["done"] == 0
+    assert not any(_alive(w) for w in workers)
+    assert not list((tmp_path / "out").rglob("*.npz"))  # nothing half-done looks finished
+
+
+def test_workers_die_with_a_killed_batch(tmp_path, root):
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 20.0"),
+                        "--jobs", "2")
+    _wait_running(tmp_path)
+    workers = _busy_workers(proc, 2)
+    os.kill(proc.pid, signal.SIGKILL)  # the main process only: workers are orphaned
+    proc.communicate(timeout=30)
+    deadline = time.time() + 10
+    while any(_alive(w) for w in workers):
+        assert time.time() < deadline, "orphaned workers kept running"
+        time.sleep(0.1)
+
+
+def test_a_locked_job_folder_fails_the_second_run_at_once(tmp_path, root):
+    from treebake.fileio import job_lock
+
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    out = tmp_path / "out"
+    with job_lock(out / "a"):
+        r = run_batch(jobs, out, workers=1)[0]
+        assert r.status == "failed" and "another treebake run" in r.message
+        cli = subprocess.run([sys.executable, "-m", "treebake.cli", "bake", str(root / SAPLING),
+                              "--out", str(out), "--name", "a", "--format", "glb"],
+                             capture_output=True, text=True, timeout=120)
+        assert cli.returncode == 1 and "another treebake run" in cli.stderr
+        assert "simulating" not in cli.stderr and not (out / "a" / "a.npz").exists()
+    assert run_batch(jobs, out, workers=1)[0].status == "done"  # released
+
+
+def test_dask_resolves_out_on_the_client_and_counts_real_workers(tmp_path, root, monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    monkeypatch.chdir(tmp_path)
+    seen = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        results = run_batch(jobs, "rel-out", workers=7, executor="dask",
+                            scheduler=cluster.scheduler_address,
+                            report=lambda e, d: seen.append(d) if e == "workers" else None)
+    assert results[0].status == "done"
+    assert (tmp_path / "rel-out" / "a" / "job.json").exists()
+    assert seen and max(seen) == 1  # the cluster's workers, not --jobs
+
+
+def test_dask_without_workers_fails_clearly_after_the_timeout(tmp_path, root):
+    distributed = pytest.importorskip("distributed")
+    from treebake.errors import TreebakeError
+
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    with distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=None) as cluster:
+        started = time.time()
+        with pytest.raises(TreebakeError, match="no Dask worker"):
+            run_batch(jobs, tmp_path / "out", executor="dask",
+                      scheduler=cluster.scheduler_address, worker_timeout=2.0)
+        assert time.time() - started < 30

@@ -115,3 +115,107 @@ def test_gltf_files_diff_like_their_bakes(bake, tmp_path):
     ref = bake.trees[0]
     assert back.paths == ref.paths
     assert np.abs(back.positions - ref.positions).max() < 2.5e-3
+
+
+# ---------------------------------------------------------------------------
+# a glb against its own bake, and damaged inputs
+
+
+@pytest.fixture(scope="module")
+def sapling_export(root, tmp_path_factory):
+    """A short sapling bake and its glb (reduced, default tolerances) and an
+    unreduced glb, each in its own export folder with its manifest."""
+    from treebake.exchange.anim import ReduceOptions
+    from treebake.export import ExportOptions, export_bake
+
+    tmp = tmp_path_factory.mktemp("sapling")
+    bake = bake_scene(load_scene(root / "presets" / "breeze.toml", {"duration": 1.0}))
+    npz = save_bake(bake, tmp / "b" / "b.npz")
+    glb = export_bake(bake, tmp, "b", bake_path=npz).folder / "b.glb"
+    full = export_bake(bake, tmp, "full", ExportOptions(reduce=ReduceOptions(enabled=False)),
+                       bake_path=npz).folder / "full.glb"
+    return bake, npz, glb, full
+
+
+def test_a_glb_and_its_own_bake_are_the_same_within_the_declared_reduction(sapling_export,
+                                                                            capsys):
+    from treebake.diff import load_any
+
+    bake, npz, glb, full = sapling_export
+    # unreduced: every joint and every tip (terminal segments too) is the bake's own, to
+    # float32 round-off of composing local transforms; the old reader put tips at bases
+    exact = diff_bakes(load_any(full), bake)
+    assert exact.max_position < 2e-5 and exact.max_angle < 1e-2 and exact.allowance_note == ""
+    assert main(["diff", str(glb), str(npz)]) == 0
+    text = capsys.readouterr().out
+    assert "within tolerance" in text and "keyframe reduction declared by b.glb" in text
+    r = diff_bakes(load_any(glb), bake)
+    assert r.position_allowance == 0.002 and r.angle_allowance == pytest.approx(0.25)
+    assert r.max_position <= 0.002 + 2e-5  # the reduction keeps its promise
+    # and the allowance does not hide a real change: 5 mm at one tip
+    other = copy.deepcopy(bake)
+    t = other.trees[0]
+    tip = int(np.nonzero(~np.isin(np.arange(t.n_segments), t.seg_parent))[0][-1])
+    t.positions[5:, tip] += np.float32([0.0, 0.0, 0.005])
+    moved = diff_bakes(load_any(glb), other)
+    assert not moved.within and moved.worst[0].segment == tip
+
+
+def _rotation_keys_offset(glb: bytes) -> int:
+    """Byte offset in the file of the middle of the first rotation channel's values."""
+    import json
+    import struct
+
+    length = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20:20 + length])
+    anim = doc["animations"][0]
+    ch = next(c for c in anim["channels"] if c["target"]["path"] == "rotation")
+    acc = doc["accessors"][anim["samplers"][ch["sampler"]]["output"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    return 20 + length + 8 + view.get("byteOffset", 0) + view["byteLength"] // 2
+
+
+def test_damaged_or_foreign_inputs_are_clear_errors_not_tracebacks(sapling_export, tmp_path,
+                                                                   capsys):
+    import shutil
+
+    bake, npz, glb, full = sapling_export
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    text = tmp_path / "notes.npz"
+    text.write_text("hello")
+    cut = tmp_path / "cut.glb"  # truncated, no manifest beside it: the lengths tell
+    cut.write_bytes(glb.read_bytes()[:1000])
+    alone = tmp_path / "alone"  # overwritten, without a manifest beside it
+    alone.mkdir()
+    data = bytearray(glb.read_bytes())
+    at = _rotation_keys_offset(bytes(data))  # in the motion: no sha256 to tell, the data must
+    data[at:at + 10] = b"\xab" * 10
+    (alone / "b.glb").write_bytes(bytes(data))
+    edited = tmp_path / "edited"  # overwritten where a manifest records its sha256
+    shutil.copytree(glb.parent, edited)
+    data = bytearray(glb.read_bytes())
+    data[-2000:-1990] = bytes(10)
+    (edited / "b.glb").write_bytes(bytes(data))
+    cases = {empty: "empty (0 bytes)", text: "not a treebake bake",
+             cut: "truncated", alone / "b.glb": "damaged data",
+             edited / "b.glb": "does not match the size and sha256"}
+    for path, message in cases.items():
+        capsys.readouterr()
+        assert main(["diff", str(path), str(npz)]) == 2, path
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err and "allow_pickle" not in err, err
+
+
+def test_a_closed_pipe_is_not_a_traceback(sapling_export):
+    import subprocess
+    import sys
+
+    bake, npz, glb, full = sapling_export
+    proc = subprocess.Popen([sys.executable, "-m", "treebake.cli", "diff", str(npz), str(glb)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # like `| head` that has already left
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+    assert proc.returncode == 141

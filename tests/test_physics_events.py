@@ -14,6 +14,15 @@ from treebake.sway import segment_ends
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
 
 
+def edit(text: str, *changes: tuple[str, str]) -> str:
+    """str.replace that fails when the text to replace is not there (a
+    grammar's value changed): a silent no-op would test the wrong tree."""
+    for old, new in changes:
+        assert old in text, f"{old!r} is no longer in the grammar"
+        text = text.replace(old, new)
+    return text
+
+
 def bake(tmp_path, grammar, **scene):
     path = tmp_path / "g.lsys"
     path.write_text(grammar)
@@ -78,8 +87,8 @@ def test_overloaded_branch_breaks_falls_and_rests_on_the_ground(tmp_path):
 def test_uprooted_tree_falls_downwind(tmp_path, root):
     """A shallow root plate (anchor 3 kN m) in a storm: the root joint goes
     and the tree ends up on the ground downwind."""
-    grammar = (root / "grammars" / "sapling.lsys").read_text().replace(
-        "anchor: 800", "anchor: 30").replace("rupture: 45e6", "")
+    grammar = edit((root / "grammars" / "sapling.lsys").read_text(),
+                   ("anchor: 800", "anchor: 30"), ("rupture: 45e6", ""))
     b = bake(tmp_path, grammar, duration=8.0,
              wind={"speed": 40.0, "turbulence": 0.2, "ramp": 1.0, "direction": 90.0})
     tree = b.trees[0]
@@ -105,5 +114,7 @@ def test_projectile_and_tree_exchange_momentum(tmp_path):
     assert after < 0.5 * before  # it hit something
     top = tip(b.trees[0])
     assert top[:, 0].max() > 0.05  # pushed along +x
-    # and it is the stem's stiffness, not a teleport: it swings back
-    assert top[:, 0].min() < 0.5 * top[:, 0].max()
+    # and it is the stem's stiffness, not a teleport: it swings back after the
+    # push (the minimum over the whole run would be frame 0, at rest, always)
+    peak = int(np.argmax(top[:, 0]))
+    assert peak < len(top) - 1 and top[peak:, 0].min() < 0.5 * top[peak, 0]

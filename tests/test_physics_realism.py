@@ -1,37 +1,85 @@
-"""Realism that can be measured: each species' first sway frequency and
-damping ratio, from a pull-and-release test in the simulator (the field
-method), fall inside the ranges of docs/physics-sources.md (sections 1.3
-and 2). Those bands are sanity bands built from field data where it
-exists (spruce: Milne 1991, scaled by DBH/H^2) and cantilever estimates with
-published wood properties elsewhere; damping: 0.08-0.5 for intact crowns
-(Moore & Maguire 2005), the low end for palm and bamboo.
+"""Realism that can be measured: each species' first sway frequency, from a
+pull-and-release test in the simulator (the field method), against
+docs/physics-sources.md section 1.3. Only spruce's band rests on field data
+(Milne 1991, scaled by DBH/H^2): that is the one realism test. The other
+species' bands are cantilever estimates with published wood properties
+(the document's "[D]", unverified): plausibility checks, named as such.
 
-The thesis' users found its trees too springy and too slow to settle: a
-damping ratio above 0.08 settles a pulled tree within about 2 cycles to a
-fifth of its swing."""
+Damping is NOT tested for realism here: each grammar sets its own
+first-mode damping ratio (`damping:`), and the field band's low end (0.08,
+Moore & Maguire 2005) is the value several grammars set, so "the measured
+ratio is inside the band" only says the solver reproduces its input. That
+is what the damping test checks, and says: a solver check. Whether the
+inputs are realistic is a data question, checked against the field band
+without the simulator."""
+
+import functools
+import re
 
 import pytest
 from conftest import GRAMMARS
 
 from treebake.sway import pull_release
 
-BANDS = {  # species: (f1 Hz low, high), (damping ratio low, high)
-    "spruce": ((0.3, 0.7), (0.08, 0.5)),
-    "oak": ((0.3, 1.0), (0.08, 0.5)),
-    "willow": ((0.3, 0.9), (0.08, 0.5)),
-    "palm": ((0.15, 0.45), (0.05, 0.5)),
-    "bamboo": ((0.15, 0.5), (0.05, 0.5)),
-    "sapling": ((0.7, 2.0), (0.08, 0.5)),
+FIELD_BANDS = {"spruce": (0.3, 0.7)}  # f1 Hz: Milne 1991 field data, scaled
+ESTIMATE_BANDS = {  # f1 Hz: cantilever estimates ("[D]"), not measurements
+    "oak": (0.3, 1.0),
+    "willow": (0.3, 0.9),
+    "palm": (0.15, 0.45),
+    "bamboo": (0.15, 0.5),
+    "sapling": (0.7, 2.0),
 }
+INTACT_CROWN_DAMPING = (0.08, 0.5)  # Moore & Maguire 2005, intact crowns (field data)
+NO_DAMPING_DATA = {"palm", "bamboo"}  # no field data: the grammars take a low value
+# measured ratio minus the grammar's: README's table (bench/sway.py) has it
+# within 0.03 (bamboo: 0.05 set, 0.08 measured, the logarithmic decrement of
+# a culm clump's beating modes); 0.04 leaves room for machine noise only
+DAMPING_SOLVER_TOLERANCE = 0.04
 
 
-@pytest.mark.parametrize("species", sorted(BANDS))
-def test_pull_and_release_in_published_ranges(species):
-    (f_lo, f_hi), (z_lo, z_hi) = BANDS[species]
-    r = pull_release(GRAMMARS / f"{species}.lsys")
-    assert f_lo <= r.frequency <= f_hi, f"{species}: f1 = {r.frequency:.3f} Hz"
-    assert z_lo <= r.damping <= z_hi, f"{species}: damping ratio {r.damping:.3f}"
+@functools.cache
+def measured(species: str):
+    return pull_release(GRAMMARS / f"{species}.lsys")
+
+
+def grammar_damping(species: str) -> float:
+    text = (GRAMMARS / f"{species}.lsys").read_text()
+    return float(re.search(r"^damping:\s*([0-9.eE+-]+)", text, re.M).group(1))
+
+
+@pytest.mark.parametrize("species", sorted(FIELD_BANDS))
+def test_first_sway_frequency_matches_field_data(species):
+    lo, hi = FIELD_BANDS[species]
+    r = measured(species)
+    assert lo <= r.frequency <= hi, f"{species}: f1 = {r.frequency:.3f} Hz"
+    assert 0.003 * r.height < r.deflection < 0.03 * r.height  # pulled ~1 %, as in the field
+    # (no check against the rig's own Rayleigh estimate: 0.5x-2x could not fail,
+    # and the estimate is the code under test, not an independent truth)
+
+
+@pytest.mark.parametrize("species", sorted(ESTIMATE_BANDS))
+def test_first_sway_frequency_is_plausible(species):
+    """Plausibility, not realism: the bands are estimates (see module doc)."""
+    lo, hi = ESTIMATE_BANDS[species]
+    r = measured(species)
+    assert lo <= r.frequency <= hi, f"{species}: f1 = {r.frequency:.3f} Hz"
     # the pull moved the stem top by about 1 % of the height, as in field tests
     assert 0.003 * r.height < r.deflection < 0.03 * r.height
-    # the rig's own estimate (no simulation) agrees on the order of magnitude
-    assert 0.5 < r.frequency / r.rayleigh_frequency < 2.0
+
+
+@pytest.mark.parametrize("species", sorted({**FIELD_BANDS, **ESTIMATE_BANDS}))
+def test_damping_ratio_is_the_grammars_solver_check(species):
+    """A solver check, not realism: the measured first-mode damping ratio
+    is the one the grammar asks for."""
+    r = measured(species)
+    assert r.damping == pytest.approx(grammar_damping(species), abs=DAMPING_SOLVER_TOLERANCE), \
+        f"{species}: measured {r.damping:.3f}, grammar {grammar_damping(species)}"
+
+
+@pytest.mark.parametrize("species", sorted(set(FIELD_BANDS) | set(ESTIMATE_BANDS)
+                                           - NO_DAMPING_DATA))
+def test_grammar_damping_inside_field_data(species):
+    """Data, not code: the ratio a grammar sets lies in the intact-crown
+    field band."""
+    lo, hi = INTACT_CROWN_DAMPING
+    assert lo <= grammar_damping(species) <= hi

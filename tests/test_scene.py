@@ -43,10 +43,10 @@ def scene_error(raw, match):
 
 def test_out_of_range_names_key_value_and_range():
     err = scene_error({"tree": [{"grammar": SAPLING}], "duration": -1},
-                      r"duration: = -1 is out of range \[0, 3600\]")
+                      r"duration = -1 is out of range \[0, 3600\]")
     assert err.key == "duration"
     scene_error({"tree": [{"grammar": SAPLING}], "wind": {"speed": 500}},
-                r"wind\.speed: = 500 is out of range \[0, 120\]")
+                r"wind\.speed = 500 is out of range \[0, 120\]")
     scene_error({"tree": [{"grammar": SAPLING}], "explosion": [{"position": [0, 0, 0],
                                                                  "charge": 0}]},
                 r"explosion\[0\]\.charge")
@@ -60,9 +60,9 @@ def test_unknown_keys_and_wrong_types():
     scene_error({"tree": [{"grammar": "missing.lsys"}]}, r"tree\[0\]\.grammar: file not found")
     scene_error({}, r"tree: the scene has no trees")
     scene_error({"tree": [{"grammar": SAPLING}], "quality": "ultra"},
-                r"quality: = 'ultra' is not one of")
+                r"quality = 'ultra' is not one of")
     scene_error({"tree": [{"grammar": SAPLING}], "cut": [{"tree": 3}]},
-                r"cut\[0\]\.tree: = 3 is out of range \[0, 0\]")
+                r"cut\[0\]\.tree = 3 is out of range \[0, 0\]")
 
 
 def test_forest_that_cannot_fit_says_so():

@@ -14,6 +14,7 @@ trees are plain meshes with no joints and no animation.
 from __future__ import annotations
 
 import json
+import math
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -216,12 +217,16 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
     S = tree.n_segments
     root = doc.node({"name": tree.name}, root=True)
     base = len(doc.nodes)
-    for s in range(S):
-        doc.node({"name": tree.paths[s],
-                  **_trs(anim.translation[first + s], anim.rotation[first + s])})
     children: dict[int, list[int]] = {}
     for s in range(S):
         children.setdefault(int(tree.seg_parent[s]), []).append(base + s)
+    # glTF has no bone length: a terminal joint carries its segment's tip
+    # (rest offset from its base, Y up) so a reader (treebake diff) can pose it
+    tips = points_y_up(tree.points[tree.seg_end] - tree.points[tree.seg_start])
+    for s in range(S):
+        extras = {} if s in children else {"extras": {"tip": _floats(tips[s])}}
+        doc.node({"name": tree.paths[s],
+                  **_trs(anim.translation[first + s], anim.rotation[first + s]), **extras})
     doc.nodes[root]["children"] = children.get(-1, [])
     for s, kids in children.items():
         if s >= 0:
@@ -278,8 +283,12 @@ def scene_animation(bake: Bake, trees: list[int], objects: bool,
 
 def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objects: bool,
           opts: ReduceOptions) -> tuple[_Document, Animation | None]:
-    # the frame grid, so a reader (treebake diff) can sample reduced channels
-    doc = _Document(name, {"fps": bake.fps, "frames": len(bake.times)})
+    # the frame grid, so a reader (treebake diff) can sample reduced channels,
+    # and the reduction's world tolerances: how far the file may be from its bake
+    reduction = {"position_m": opts.position_tolerance if opts.enabled else 0.0,
+                 "angle_deg": round(math.degrees(opts.angle_tolerance), 9) if opts.enabled
+                 else 0.0}
+    doc = _Document(name, {"fps": bake.fps, "frames": len(bake.times), "reduction": reduction})
     anim, first, obj_first = scene_animation(bake, trees, objects, opts)
     joint_node: dict[int, int] = {}
     for i in trees:

@@ -8,8 +8,13 @@ every frame (the frame grid is in `asset.extras.treebake`, written by our
 exporter; otherwise the union of the key times) with glTF's LINEAR rule
 (slerp for rotations), composed down the hierarchy, and turned back from
 Y up to our Z up. Static trees (plain meshes) come back with no segments.
-glTF has no segment tips, so a terminal segment's end is taken at its base:
-rotations still compare everything.
+glTF has no segment tips: our exporter writes a terminal joint's tip in its
+node's `extras.tip`; a file without them comes back with those segments'
+ends at their bases, listed in the tree's info["tipless"] (diff then
+compares their bases). The file's structure is checked on the way (chunk
+and buffer lengths, accessor ranges, declared min/max, finite values, unit
+quaternions), so a truncated or overwritten file is an error.
+The keyframe reduction's declared tolerances come back in meta["reduction"].
 """
 
 from __future__ import annotations
@@ -36,22 +41,49 @@ _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 def _load(path: Path) -> tuple[dict, bytes]:
+    """The JSON document and the binary buffer, every length checked: a
+    truncated or overwritten file is an error here, not a silent result."""
     data = path.read_bytes()
+    if not data:
+        raise InputError(f"{path}: the file is empty (0 bytes)")
     if path.suffix.lower() == ".glb":
         if len(data) < 20 or data[:4] != b"glTF":
-            raise InputError(f"{path}: not a binary glTF file")
-        length, _ = struct.unpack_from("<II", data, 12)
+            raise InputError(f"{path}: not a binary glTF file (no 'glTF' header)")
+        version, total = struct.unpack_from("<II", data, 4)
+        if version != 2:
+            raise InputError(f"{path}: glTF version {version}, expected 2")
+        if total != len(data):
+            raise InputError(f"{path}: the header says {total} bytes, the file has {len(data)} "
+                             "(truncated or appended to)")
+        length, kind = struct.unpack_from("<II", data, 12)
+        if kind != 0x4E4F534A or 20 + length > len(data):
+            raise InputError(f"{path}: the JSON chunk is damaged (type {kind:#x}, "
+                             f"{length} bytes)")
         doc = json.loads(data[20:20 + length])
         blob = b""
         at = 20 + length
         if at + 8 <= len(data):
-            blen, _ = struct.unpack_from("<II", data, at)
+            blen, kind = struct.unpack_from("<II", data, at)
+            if kind != 0x004E4942 or at + 8 + blen != len(data):
+                raise InputError(f"{path}: the binary chunk is damaged (type {kind:#x}, "
+                                 f"{blen} bytes at {at + 8} of {len(data)})")
             blob = data[at + 8:at + 8 + blen]
-        return doc, blob
-    doc = json.loads(data)
+        elif at != len(data):
+            raise InputError(f"{path}: {len(data) - at} stray bytes after the JSON chunk")
+    else:
+        doc = json.loads(data)
+        buffers = doc.get("buffers", [])
+        blob = (path.parent / buffers[0]["uri"]).read_bytes() if buffers and \
+            "uri" in buffers[0] else b""
+    if not isinstance(doc, dict) or str(doc.get("asset", {}).get("version")) != "2.0":
+        raise InputError(f"{path}: not a glTF 2.0 document")
     buffers = doc.get("buffers", [])
-    blob = (path.parent / buffers[0]["uri"]).read_bytes() if buffers and \
-        "uri" in buffers[0] else b""
+    if buffers and buffers[0].get("byteLength") != len(blob):
+        raise InputError(f"{path}: buffer 0 should hold {buffers[0].get('byteLength')} bytes, "
+                         f"found {len(blob)} (truncated?)")
+    for i, view in enumerate(doc.get("bufferViews", [])):
+        if view.get("byteOffset", 0) + view["byteLength"] > len(blob):
+            raise InputError(f"{path}: bufferView {i} runs past the end of the buffer")
     return doc, blob
 
 
@@ -63,12 +95,58 @@ def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     stride = view.get("byteStride", dtype.itemsize * width)
     count = acc["count"]
+    if count < 0 or (count and acc.get("byteOffset", 0) + stride * (count - 1)
+                     + dtype.itemsize * width > view["byteLength"]):
+        raise ValueError(f"accessor {index} runs past its bufferView")
     raw = np.frombuffer(blob, dtype=np.uint8, count=view["byteLength"],
                         offset=view.get("byteOffset", 0))
     rows = np.lib.stride_tricks.as_strided(
         raw[start - view.get("byteOffset", 0):], shape=(count, dtype.itemsize * width),
         strides=(stride, 1))
-    return np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
+    out = np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
+    if not np.isfinite(out).all():
+        raise ValueError(f"accessor {index} holds NaN or infinite values (damaged data)")
+    if "min" in acc and "max" in acc and count:  # the file's own bounds: overwritten data
+        lo, hi = np.asarray(acc["min"], float), np.asarray(acc["max"], float)  # falls outside
+        slack = 1e-6 * np.maximum(1.0, np.abs(np.concatenate([lo, hi])).max())
+        if (out < lo - slack).any() or (out > hi + slack).any():
+            raise ValueError(f"accessor {index} holds values outside its declared min/max "
+                             "(damaged data)")
+    return out
+
+
+def _check_meshes(doc: dict, blob: bytes) -> None:
+    """Read every accessor of every mesh and check what its kind promises:
+    positions inside their declared min/max, unit normals, skin weights in
+    [0, 1] summing to 1, joint and vertex indices in range, finite values.
+    Bytes overwritten in a mesh show up here although diff compares only
+    motion. (A manifest.json beside the file catches every change: diff
+    checks its sha256 too.)"""
+    skins = doc.get("skins", [])
+    for n, node in enumerate(doc.get("nodes", [])):
+        if "mesh" not in node:
+            continue
+        joints = len(skins[node["skin"]]["joints"]) if "skin" in node else 0
+        for prim in doc["meshes"][node["mesh"]]["primitives"]:
+            attrs = prim["attributes"]
+            count = doc["accessors"][attrs["POSITION"]]["count"]
+            for name, index in attrs.items():
+                values = _accessor(doc, blob, index)
+                if name == "NORMAL" and len(values) and \
+                        np.abs(np.linalg.norm(values, axis=1) - 1).max() > 1e-3:
+                    raise ValueError(f"node {n}: normals are not unit length (damaged data)")
+                if name == "WEIGHTS_0" and len(values) and \
+                        ((values < 0).any() or (values > 1).any()
+                         or np.abs(values.sum(axis=1) - 1).max() > 1e-3):
+                    raise ValueError(f"node {n}: skin weights do not sum to 1 (damaged data)")
+                if name == "JOINTS_0" and len(values) and values.max() >= max(joints, 1):
+                    raise ValueError(f"node {n}: a vertex names joint {int(values.max())} of "
+                                     f"{joints} (damaged data)")
+            if "indices" in prim:
+                idx = _accessor(doc, blob, prim["indices"])
+                if len(idx) and idx.max() >= count:
+                    raise ValueError(f"node {n}: a triangle names vertex {int(idx.max())} of "
+                                     f"{count} (damaged data)")
 
 
 def _sample(times: np.ndarray, keys: np.ndarray, values: np.ndarray,
@@ -88,9 +166,13 @@ def read_gltf_bake(path: str | Path) -> Bake:
     p = Path(path)
     try:
         doc, blob = _load(p)
+        _check_meshes(doc, blob)
         return _to_bake(doc, blob, p)
-    except (OSError, ValueError, KeyError, IndexError, struct.error) as exc:
-        raise InputError(f"{p}: not a readable glTF file ({exc})") from None
+    except InputError:
+        raise
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
+            struct.error) as exc:
+        raise InputError(f"{p}: not a readable treebake glTF file ({exc})") from None
 
 
 def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
@@ -103,8 +185,14 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
         for ch in anim["channels"]:
             sampler = anim["samplers"][ch["sampler"]]
             keys = _accessor(doc, blob, sampler["input"])[:, 0]
-            channels[(ch["target"]["node"], ch["target"]["path"])] = (
-                keys, _accessor(doc, blob, sampler["output"]))
+            if len(keys) > 1 and not (np.diff(keys) > 0).all():
+                raise ValueError("animation key times do not increase (damaged data)")
+            values = _accessor(doc, blob, sampler["output"])
+            if ch["target"]["path"] == "rotation" and len(values) and \
+                    np.abs(np.linalg.norm(values, axis=1) - 1.0).max() > 1e-3:
+                raise ValueError(f"node {ch['target']['node']}: a rotation key is not a unit "
+                                 "quaternion (damaged data)")
+            channels[(ch["target"]["node"], ch["target"]["path"])] = (keys, values)
             all_keys.append(keys)
     if "fps" in info and "frames" in info:
         times = np.arange(int(info["frames"])) / float(info["fps"])
@@ -135,12 +223,30 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
                 t_loc[:, s] = _sample(times, *channels[(j, "translation")], rotation=False)
             if (j, "rotation") in channels:
                 q_loc[:, s] = _sample(times, *channels[(j, "rotation")], rotation=True)
+        norms = np.linalg.norm(q_loc, axis=-1)
+        if np.abs(norms - 1.0).max(initial=0.0) > 1e-3:
+            raise ValueError(f"skin {skin.get('name')!r}: a joint rotation is not a unit "
+                             "quaternion (damaged data)")
         pos, rot = _world(seg_parent, t_loc, q_loc)
         end = np.arange(S)
+        tips, tipless = [], []
         for s in range(S):  # a segment ends where its first child starts
             kids = np.nonzero(seg_parent == s)[0]
-            end[s] = kids[0] if len(kids) else s
+            if len(kids):
+                end[s] = kids[0]
+                continue
+            tip = nodes[joints[s]].get("extras", {}).get("tip")  # terminal: its own tip
+            if tip is None:  # an older file: the tip is unknown, diff compares its base
+                tipless.append(s)
+                continue
+            end[s] = S + len(tips)
+            tips.append(rest[s] + points_z_up(np.asarray(tip, float)[None])[0])
+        if tips:
+            rest = np.concatenate([rest, np.asarray(tips)])
         paths = [nodes[j].get("name", f"joint{s}") for s, j in enumerate(joints)]
+        tree_info: dict = {"source": p.name}
+        if tipless:
+            tree_info["tipless"] = tipless
         trees.append(TreeBake(
             name=skin.get("name", f"tree{len(trees)}"), points=rest,
             seg_start=np.arange(S), seg_end=end, seg_parent=seg_parent,
@@ -148,7 +254,7 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             leaf_size=np.zeros(S), limb_parent=np.zeros(0, np.int64),
             limb_attach=np.zeros(0, np.int64), limb_points=[], paths=paths,
             positions=points_z_up(pos).astype(np.float32),
-            rotations=quats_z_up(rot).astype(np.float32), info={"source": p.name}))
+            rotations=quats_z_up(rot).astype(np.float32), info=tree_info))
     skinned_names = {t.name for t in trees}
     for i in doc.get("scenes", [{}])[doc.get("scene", 0)].get("nodes", []):
         node = nodes[i]
@@ -160,7 +266,10 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
                                   np.zeros(0, np.int64), np.zeros(0, np.int64), [], [],
                                   np.zeros((1, 0, 3), np.float32),
                                   np.zeros((1, 0, 4), np.float32), {"static": "no joints"}))
-    return Bake(times, trees, {"fps": fps, "scene": p.stem, "source": str(p)})
+    meta = {"fps": fps, "scene": p.stem, "source": str(p)}
+    if isinstance(info.get("reduction"), dict):
+        meta["reduction"] = info["reduction"]
+    return Bake(times, trees, meta)
 
 
 def _world(parent: np.ndarray, t_loc: np.ndarray, q_loc: np.ndarray):

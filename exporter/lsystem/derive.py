@@ -245,7 +245,8 @@ class _Rewriter:
         if count > limits.max_modules:
             raise LimitError(
                 f"{self.grammar.file}: the derived string exceeds {limits.max_modules} modules "
-                f"at iteration {iteration}; lower the iteration count or raise --max-modules")
+                f"at iteration {iteration}; lower the iteration count (the grammar's `iterations:`, "
+                f"or the scene tree's `iterations`)")
         estimate = count * _BYTES_PER_MODULE + params * _BYTES_PER_PARAM
         if estimate > limits.max_bytes:
             raise LimitError(

@@ -1,0 +1,154 @@
+"""CLI under bad input: outputs and formats checked before any simulation,
+plain progress without a terminal, messages that fit the command, summary
+lines that name every file, help pages with examples and defaults."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from treebake.cli import main
+
+SAPLING = "grammars/sapling.lsys"
+QUICK = ["--duration", "0.5", "--fps", "12", "--quality", "draft"]
+
+
+def run(*args, env=None, timeout=300):
+    return subprocess.run([sys.executable, "-m", "treebake.cli", *map(str, args)],
+                          capture_output=True, text=True, check=False, timeout=timeout,
+                          env={**os.environ, **(env or {})})
+
+
+@pytest.fixture(scope="module")
+def small_bake(root, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bake")
+    assert main(["bake", str(root / SAPLING), *QUICK, "--out", str(out), "-q"]) == 0
+    return out / "sapling" / "sapling.npz"
+
+
+@pytest.fixture
+def blocked(tmp_path):
+    """An output folder no one can create, root included: its parent is a file."""
+    wall = tmp_path / "a-file"
+    wall.write_text("not a folder")
+    return wall / "out"
+
+
+def test_unwritable_output_is_a_clear_error_before_any_work(root, small_bake, blocked, capsys):
+    started = time.perf_counter()
+    commands = [
+        ["bake", root / SAPLING, "--out", blocked],  # full duration: would take long
+        ["export", small_bake, "--out", blocked],
+        ["preview", small_bake, "--out", blocked],
+        ["inspect", root / SAPLING, "--out", blocked],
+        ["derive", root / SAPLING, "-o", blocked / "modules.txt"],
+    ]
+    for args in commands:
+        capsys.readouterr()
+        assert main([str(a) for a in args]) == 2, args
+        err = capsys.readouterr().err
+        assert "cannot write" in err and str(blocked) in err, (args, err)
+        assert "simulating" not in err and "Traceback" not in err
+    assert time.perf_counter() - started < 20  # nothing was simulated
+
+
+def test_unknown_format_fails_before_simulating(root, tmp_path, capsys):
+    for fmt in ("fbx", "glb,fbx"):
+        assert main(["bake", str(root / SAPLING), "--out", str(tmp_path), "--format", fmt]) == 2
+        err = capsys.readouterr().err
+        assert "unknown export format 'fbx'" in err and "simulating" not in err
+    assert not list(tmp_path.rglob("*.npz"))
+
+
+def test_empty_export_format_is_an_error(small_bake, tmp_path, capsys):
+    assert main(["export", str(small_bake), "--out", str(tmp_path), "--format", ""]) == 2
+    assert "names no export format" in capsys.readouterr().err
+    assert not list(tmp_path.rglob("*.glb"))
+
+
+def test_bake_of_a_bake_says_what_to_do(small_bake, capsys):
+    assert main(["bake", str(small_bake)]) == 2
+    err = capsys.readouterr().err
+    assert "is a bake, not a scene" in err and "treebake export" in err and "UTF-8" not in err
+
+
+def test_module_limit_messages_name_options_the_command_has(tmp_path):
+    big = tmp_path / "big.lsys"
+    big.write_text("axiom: F\niterations: 30\nF -> FF\n")
+    bake = run("bake", big, "--out", tmp_path)
+    assert bake.returncode == 2 and "exceeds" in bake.stderr
+    assert "--max-modules" not in bake.stderr and "iterations" in bake.stderr
+    derive = run("derive", big, "--max-modules", "100")
+    assert derive.returncode == 2 and "raise --max-modules" in derive.stderr
+
+
+def test_plain_progress_lines_without_a_terminal(root, tmp_path):
+    r = run("bake", root / SAPLING, *QUICK, "--out", tmp_path, "--format", "glb",
+            env={"TREEBAKE_PROGRESS_SECONDS": "0"})
+    assert r.returncode == 0, r.stderr
+    lines = [x for x in r.stderr.splitlines() if x.startswith("simulating: ")]
+    assert len(lines) >= 3 and "done in" in lines[-1]  # periodic, then the end
+    assert "\r" not in r.stderr and "[#" not in r.stderr  # no bar redraws in a log
+    assert any(x.startswith("exporting glb: 1/1") for x in r.stderr.splitlines())
+    quiet = run("bake", root / SAPLING, *QUICK, "--out", tmp_path, "-q")
+    assert quiet.stderr == ""
+
+
+def test_summary_lines_in_order_naming_every_file(root, tmp_path):
+    r = run("bake", root / SAPLING, *QUICK, "--out", tmp_path, "--format", "glb,obj")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0].startswith("baked 1 tree (1 simulated, 57 segments), 7 frames in ")
+    assert lines[0].endswith("sapling.npz")
+    assert lines[1].startswith("exported ") and "sapling.glb" in lines[1]
+    assert "manifest.json" in lines[1] and "obj/sapling.0001.obj" in lines[1]
+    manifest = json.loads((tmp_path / "sapling" / "manifest.json").read_text())
+    assert f"exported {len(manifest['files']) + 1} files," in lines[1]
+    assert lines[2].startswith("keyframes: ")
+    assert " 1 files" not in r.stdout and "1 trees" not in r.stdout
+
+
+def test_negative_duration_reads_as_a_sentence(root):
+    r = run("bake", root / SAPLING, "--duration", "-5")
+    assert r.returncode == 2 and "duration = -5.0 is out of range [0, 3600]" in r.stderr
+    assert ": =" not in r.stderr
+
+
+COMMANDS = ["derive", "inspect", "bake", "export", "preview", "diff", "batch", "sway",
+            "accuracy", "stability"]
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_pages_have_examples_and_every_option_explained(command, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = capsys.readouterr().out
+    assert "examples:\n  treebake " + command in text
+    assert "%%" not in text
+    from treebake.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices[command]
+    for action in sub._actions:
+        if action.dest == "help":
+            continue
+        assert action.help, f"{command} {action.option_strings or action.dest} has no help"
+        if action.option_strings and action.default not in (None, False) and \
+                not isinstance(action.default, bool):
+            assert "default" in action.help, f"{command} {action.option_strings}: no default"
+
+
+def test_help_lists_the_valid_names():
+    """The help pages' lists are the modules' own (kept out of the parser so
+    every command starts fast)."""
+    from treebake import cli
+    from treebake.accuracy import SCENARIOS, SPECIES
+    from treebake.stress import cases
+
+    assert tuple(SPECIES) == cli.ACCURACY_SPECIES
+    assert tuple(SCENARIOS) == cli.ACCURACY_SCENARIOS
+    assert tuple(c.name for c in cases(True)) == cli.STABILITY_CASES
+    assert "gusty" in run("accuracy", "--help").stdout
+    assert "'near-zero segments'" in run("stability", "--help").stdout
