@@ -255,7 +255,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         meta["notes"] = []
         timing.update(step_seconds=round(lin.stats.step_seconds, 3),
                       update_seconds=round(lin.stats.update_seconds, 3),
-                      factor_seconds=round(lin.stats.factor_seconds, 3))
+                      build_seconds=round(lin.stats.build_seconds, 3))
     elif active:
         try:
             from .sim.reference import ReferenceSolver

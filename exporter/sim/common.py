@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -53,6 +54,21 @@ def cap_note(stats) -> str | None:
     return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone updates "
             f"(first: tree {tree!r}, segment {seg}, t = {t:.3f} s, {acc:.0f} m/s^2): the "
             "motion there is milder than the load asks")
+
+
+def hinge_axes(axis: np.ndarray, toward: np.ndarray | None = None) -> np.ndarray:
+    """The two hinges of a bone's joint (swing without twist): unit axes
+    (2, 3) perpendicular to the bone's `axis` and to each other, the first
+    turning first. With `toward`, a positive turn of the first tips the bone
+    toward it (a felling hinge); otherwise the first is horizontal when it
+    can be. Both solvers' joints use these."""
+    for cand in ([toward] if toward is not None else []) + [np.array([0.0, 0.0, 1.0]),
+                                                             np.array([1.0, 0.0, 0.0])]:
+        e = np.cross(axis, cand)
+        if np.linalg.norm(e) > 0.1:
+            e1 = e / np.linalg.norm(e)
+            return np.stack([e1, np.cross(axis, e1)])
+    raise AssertionError("no perpendicular found")  # pragma: no cover
 
 
 @dataclass
@@ -109,6 +125,7 @@ class Bones:
     length: np.ndarray  # m
     props: BoneProps
     pulls: list[Pull]
+    hinges: np.ndarray  # (B, 2, 3) each joint's two hinge axes (hinge_axes), world at rest
 
     @classmethod
     def of(cls, trees: list[SimTree]) -> Bones:
@@ -135,12 +152,23 @@ class Bones:
             leaf_area=cat(lambda t: t.rig.leaf_area), diameter=2 * radius,
             cd_wood=cat(lambda t: np.full(t.rig.n_bones, t.rig.drag)),
             cd_leaf=cat(lambda t: np.full(t.rig.n_bones, t.rig.leaf_drag)))
+        length = np.linalg.norm(tip0 - pivot0, axis=1)
+        axis0 = np.divide(tip0 - pivot0, length[:, None], out=np.tile([0.0, 0.0, 1.0], (n, 1)),
+                          where=length[:, None] > 0)
+        hinges = np.empty((n, 2, 3))
+        for ti, t in enumerate(trees):
+            toward = None
+            if t.cut is not None:  # a felled tree's root joints tip it toward the cut direction
+                a = math.radians(t.cut.direction)
+                toward = np.array([math.cos(a), math.sin(a), 0.0])
+            for b in range(int(offsets[ti]), int(offsets[ti + 1])):
+                hinges[b] = hinge_axes(axis0[b], toward if parent[b] < 0 else None)
         return cls(offsets, pivot0, tip0, cat(lambda t: t.rig.com).reshape(n, 3), mass,
                    cat(lambda t: t.rig.inertia).reshape(n, 3, 3), cat(lambda t: t.rig.k),
                    cat(lambda t: t.rig.alpha), cat(lambda t: t.rig.cone),
                    cat(lambda t: t.rig.strength), radius,
                    np.repeat(np.arange(len(trees)), [t.rig.n_bones for t in trees]),
-                   parent, np.linalg.norm(tip0 - pivot0, axis=1), props, pulls)
+                   parent, length, props, pulls, hinges)
 
     @property
     def n(self) -> int:

@@ -29,6 +29,7 @@ class Quality:
     stability: float = 1.0
     joint_correction: float = 0.02
     coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
+    linear_rate: float = 48.0  # Hz, the linear tier's implicit steps
 
 
 QUALITIES = {

@@ -128,6 +128,7 @@ from .common import (
     TreeMotion,
     cap_loads,
     cap_note,
+    hinge_axes,
     locate,
 )
 from .contact import FRICTION
@@ -146,23 +147,6 @@ LIMIT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
 XBODY = mujoco.mjtObj.mjOBJ_XBODY  # a body's frame (mjOBJ_BODY is its COM frame)
 BAD = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL,
        mujoco.mjtWarning.mjWARN_BADQPOS)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
-def hinge_axes(axis: np.ndarray, toward: np.ndarray | None = None) -> np.ndarray:
-    """Two unit hinge axes (2, 3) perpendicular to a bone `axis` and to each
-    other. With `toward`, a positive turn of the first tips the bone toward
-    it (the felling hinge); otherwise the first is horizontal when it can be."""
-    for cand in ([toward] if toward is not None else []) + [np.array([0.0, 0.0, 1.0]),
-                                                             np.array([1.0, 0.0, 0.0])]:
-        e = np.cross(axis, cand)
-        if np.linalg.norm(e) > 0.1:
-            e1 = _unit(e)
-            return np.stack([e1, np.cross(axis, e1)])
-    raise AssertionError("no perpendicular found")  # pragma: no cover
 
 
 def floored_inertia(inertia: np.ndarray) -> np.ndarray:
@@ -286,16 +270,7 @@ class ReferenceSolver:
         """Per bone, the two hinges' axes, stiffness, range and spring
         reference (set from gravity once the models exist)."""
         n = self.n
-        self.hinge_axis = np.empty((n, 2, 3))
-        toward = [None] * n
-        for ti, t in enumerate(self.trees):
-            if t.cut is not None:
-                a = math.radians(t.cut.direction)
-                for b in np.nonzero(self.parent[self.offsets[ti]:self.offsets[ti + 1]] < 0)[0]:
-                    toward[int(b) + int(self.offsets[ti])] = np.array([math.cos(a), math.sin(a),
-                                                                       0.0])
-        for b in range(n):
-            self.hinge_axis[b] = hinge_axes(self.axis0[b], toward[b])
+        self.hinge_axis = self.bones.hinges
         self.k = np.repeat(self.bones.k[:, None], 2, axis=1)  # per hinge
         self.cone = np.repeat(self.bones.cone[:, None], 2, axis=1)
         self.springref = np.zeros((n, 2))

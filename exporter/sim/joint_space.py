@@ -1,0 +1,226 @@
+"""The joint-space equations of whole trees, linearised about the grown
+shape, for the linear tier (linear.py).
+
+Coordinates: every bone's joint is two hinges at its pivot, perpendicular to
+the bone and to each other (common.hinge_axes: swing without twist), the
+second turning with the first, as the reference's. q (2B,) are the hinge
+angles from the grown shape, dof 2b + k being bone b's hinge k. The
+equations of motion,
+
+    M q'' + C q' + K_s q = J(q)^T (F + m g) - tau_g0,
+
+have M the joint-space mass matrix of the whole tree at rest (every bone's
+mass and inertia, children and parents coupled both ways), K_s the joint
+springs (the rig's k on both hinges), C the rig's structural damping (each
+limb's block of M times its alpha, the reference's form), F the external
+loads at the bones' centres of mass, m g gravity and tau_g0 the springs'
+prestress (gravity's torques at rest, so the grown shape is the equilibrium;
+0 without prestress). M, C, K_s are constant; J(q)^T is evaluated at the
+current pose (a long branch swung by a gust carries its loads on turned
+lever arms: 7 % of its deflection at 0.13 rad, measured against the
+reference), with bone rotations exp(sum of the hinge rotation vectors below
+them), exact for bending in one plane.
+
+Implicit steps need the tangent of the right-hand side: K_s plus K_g,
+gravity's geometric stiffness at rest (a hanging twig's pendulum
+stiffness, a stem's P-delta softening). M, C and K_g have entries only
+between a dof and its ancestors, so A = M + c1 C + c2 (K_s + K_g) factors
+without fill-in (treefactor.py); the products the steps need (J^T F, C v,
+poses) are sums along the tree (treesums.py), never matrices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..rotations import cross, matrices_from_rotvec
+from .common import Bones
+from .layout import ChainLayout
+from .treefactor import TreeFactor, ancestor_table, depths
+from .treesums import ChainSums
+
+
+@dataclass
+class Pose:
+    """Bones' pose (first order in the angles for velocities): rotation
+    relative to rest (B, 3, 3), pivot, COM, COM velocity, unit axis (B, 3),
+    and the current axes of every dof's hinge (2B, 3)."""
+
+    rot: np.ndarray
+    pivot: np.ndarray
+    com: np.ndarray
+    vcom: np.ndarray
+    axis: np.ndarray
+    hinge: np.ndarray
+
+
+class JointSpace:
+    """The system of some bones (whole trees, parents before children).
+    `hold` (2B,) N m: each hinge spring's prestress torque (tau_g0 of the
+    grown tree; kept when parts break off, as the wood keeps its set).
+    `c1`, `c2`: the implicit rule's weights of C and K in its matrix."""
+
+    def __init__(self, bones: Bones, layout: ChainLayout, gravity: np.ndarray, c1: float,
+                 c2: float, hold: np.ndarray | None = None):
+        self.bones, self.layout = bones, layout
+        nb = bones.n
+        n = self.n = 2 * nb
+        self.axis = bones.hinges.reshape(n, 3)
+        self.dof_bone = dof_bone = np.repeat(np.arange(nb), 2)
+        parent = np.empty(n, dtype=np.int64)
+        parent[0::2] = np.where(bones.parent >= 0, 2 * bones.parent + 1, -1)
+        parent[1::2] = np.arange(0, n, 2)
+        self.parent = parent
+        depth = depths(parent)
+        anc = ancestor_table(parent, depth)
+        # subtree moments of every bone (itself and all it carries)
+        sums = self.sums = ChainSums(layout.chain_bones, layout.chain_parent,
+                                     layout.chain_depth, nb)
+        m, c = bones.mass, bones.com0
+        s0 = sums.suffix(m[:, None])[:, 0]
+        s1 = sums.suffix(m[:, None] * c)
+        s2 = sums.suffix((m[:, None, None] * c[:, :, None] * c[:, None, :]).reshape(nb, 9)
+                         ).reshape(nb, 3, 3)
+        si = sums.suffix(bones.inertia.reshape(nb, 9)).reshape(nb, 3, 3)
+        p = bones.pivot0[dof_bone]
+        lever = s1[dof_bone] - s0[dof_bone][:, None] * p  # sum m (c - p_j) over a dof's subtree
+        # every (upstream i, downstream j) pair, root-aligned: i = anc[j, t]
+        jj, tt = np.nonzero(np.arange(anc.shape[1])[None, :] < depth[:, None])
+        ii = anc[jj, tt]
+
+        def mass_entry(i, j):
+            bj = dof_bone[j]
+            pi, pj, ni, nj = p[i], p[j], self.axis[i], self.axis[j]
+            scal = (np.trace(s2[bj], axis1=1, axis2=2) - (s1[bj] * (pi + pj)).sum(1)
+                    + s0[bj] * (pi * pj).sum(1))
+            outer = (s2[bj] - s1[bj][:, :, None] * pi[:, None, :]
+                     - pj[:, :, None] * s1[bj][:, None, :]
+                     + s0[bj][:, None, None] * pj[:, :, None] * pi[:, None, :])
+            return ((ni * nj).sum(1) * scal - np.einsum("ni,nij,nj->n", ni, outer, nj)
+                    + np.einsum("ni,nij,nj->n", ni, si[bj], nj))
+
+        def gravity_entry(i, j):
+            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j)), n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
+            ni, nj, r = self.axis[i], self.axis[j], lever[j]
+            return -((nj @ gravity) * (ni * r).sum(1) - (r @ gravity) * (ni * nj).sum(1))
+
+        every = np.arange(n)
+        m_diag, m_low = mass_entry(every, every), mass_entry(ii, jj)
+        self.k_spring = np.repeat(bones.k, 2)
+        k_diag = self.k_spring + gravity_entry(every, every)
+        k_low = gravity_entry(ii, jj)
+        # structural damping: each limb's block of M times its alpha
+        limb = layout.bone_chain[dof_bone]
+        self.alpha = alpha = bones.alpha[dof_bone]
+        c_diag = alpha * m_diag
+        c_low = np.where(limb[ii] == limb[jj], alpha[jj] * m_low, 0.0)
+        self.tau_g0 = (self.axis * cross(lever, np.broadcast_to(gravity, lever.shape))).sum(1)
+        self.hold = self.tau_g0.copy() if hold is None else hold
+        self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
+
+        def rows(low):
+            out = np.zeros(anc.shape)
+            out[jj, tt] = low
+            return out
+
+        # the solve runs chain by chain: a bone chain's dofs, in order
+        chains = [np.stack([2 * b, 2 * b + 1], 1).ravel() for b in layout.chain_bones]
+        level = layout.chain_depth
+        self.factor = TreeFactor(parent, m_diag + c1 * c_diag + c2 * k_diag,
+                                 rows(m_low + c1 * c_low + c2 * k_low), chains, level)
+        self.mass_factor = TreeFactor(parent, m_diag.copy(), rows(m_low), chains, level)
+        # constants of the products
+        self.cross_pivot = cross(self.axis, p)
+        self.per_hinge = np.concatenate([self.axis, self.cross_pivot], 1).reshape(nb, 2, 6)
+        self.second_turn = cross(bones.hinges[:, 0], bones.hinges[:, 1])  # d(hinge 1)/dq_0
+        has = bones.parent >= 0
+        self.arm = bones.pivot0 - np.where(has[:, None], bones.pivot0[np.maximum(
+            bones.parent, 0)], 0.0)  # pivot from its parent's pivot, at rest
+        # damping: a bone's own mass plus the side chains hanging on it (its
+        # subtree without the rest of its chain), moved by its limb alone
+        nxt = np.full(nb, -1, dtype=np.int64)
+        for cb in layout.chain_bones:
+            nxt[cb[:-1]] = cb[1:]
+        more = nxt >= 0
+        nx = np.maximum(nxt, 0)
+        l0 = s0 - np.where(more, s0[nx], 0.0)
+        l1 = s1 - np.where(more[:, None], s1[nx], 0.0)
+        l2 = s2 - np.where(more[:, None, None], s2[nx], 0.0)
+        li = si - np.where(more[:, None, None], si[nx], 0.0)
+        self.lump = (l0, l1, np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+                     - l2 + li)
+        self.axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
+
+    def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """M, C and the tangent stiffness K_s + K_g as dense matrices (checks)."""
+        m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj = self.matrices
+        out = []
+        for diag, low in ((m_diag, m_low), (c_diag, c_low), (k_diag, k_low)):
+            a = np.diag(diag)
+            a[jj, ii] = low
+            a[ii, jj] = low
+            out.append(a)
+        return tuple(out)
+
+    # ------------------------------------------------------------------
+    # products
+
+    def kinematics(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Prefix sums (B, 12) down the tree of sum q n, sum q n x p, sum v n,
+        sum v n x p over each bone's hinges and all below it: its rotation
+        vector, the terms its points move by, and their rates."""
+        nb = self.bones.n
+        qv = np.stack([q, v], 1).reshape(nb, 2, 2)  # (bone, hinge, q or v)
+        own = np.einsum("bhs,bhk->bsk", qv, self.per_hinge).reshape(nb, 12)
+        return self.sums.prefix(own)
+
+    def pose(self, kin: np.ndarray, q: np.ndarray) -> Pose:
+        """Bones' pose: rotations exp(rotation vector), pivots by summing
+        turned arms down the tree; COM velocities first order."""
+        b = self.bones
+        rot = matrices_from_rotvec(kin[:, 0:3])
+        has = b.parent >= 0
+        frame = np.where(has[:, None, None], rot[np.maximum(b.parent, 0)], np.eye(3))
+        pivot = self.sums.prefix(np.einsum("bij,bj->bi", frame, self.arm))
+        com = pivot + np.einsum("bij,bj->bi", rot, b.com0 - b.pivot0)
+        c0 = b.com0
+        vcom = cross(kin[:, 6:9], c0) - kin[:, 9:12]
+        axis = np.einsum("bij,bj->bi", rot, self.axis0)
+        h = b.hinges
+        first = np.einsum("bij,bj->bi", frame, h[:, 0])
+        second = np.einsum("bij,bj->bi", frame, h[:, 1] + q[0::2, None] * self.second_turn)
+        return Pose(rot, pivot, com, vcom, axis, np.stack([first, second], 1).reshape(-1, 3))
+
+    def rhs(self, force: np.ndarray, kin: np.ndarray, pose: Pose, q: np.ndarray) -> np.ndarray:
+        """J(q)^T F - hold - C v - K_s q (N m per dof) for forces (B, 3) N at
+        the bones' COMs, gravity included."""
+        per_bone = np.empty((len(force), 6))
+        per_bone[:, 0:3] = force
+        per_bone[:, 3:6] = cross(pose.com, force)
+        sub = self.sums.suffix(per_bone)[self.dof_bone]
+        p = pose.pivot[self.dof_bone]
+        loads = (pose.hinge * (sub[:, 3:6] - cross(p, sub[:, 0:3]))).sum(1)
+        return loads - self.hold - self.alpha * self.limb_momentum(kin) - self.k_spring * q
+
+    def limb_momentum(self, kin: np.ndarray) -> np.ndarray:
+        """M_LL v_L for every limb L, per dof: the limb's block of M times its
+        own hinge rates. Those rates move each of its bones (and the side
+        chains on it, rigidly) by the bone's turn rate relative to the limb's
+        frame; their moments about each hinge add up along the limb."""
+        l0, l1, l2 = self.lump
+        fr = self.layout.bone_frame
+        frame = np.where((fr >= 0)[:, None], kin[np.maximum(fr, 0)], 0.0)
+        w = kin[:, 6:9] - frame[:, 6:9]
+        lin = kin[:, 9:12] - frame[:, 9:12]
+        per_bone = np.empty((len(w), 6))
+        per_bone[:, 0:3] = np.einsum("bij,bj->bi", l2, w) - cross(l1, lin)
+        per_bone[:, 3:6] = cross(w, l1) - l0[:, None] * lin
+        sub = self.sums.chain_suffix(per_bone)[self.dof_bone]
+        return (self.axis * sub[:, 0:3]).sum(1) - (self.cross_pivot * sub[:, 3:6]).sum(1)
+
+    def bending_moment(self, q: np.ndarray) -> np.ndarray:
+        """Magnitude (B,) N m of the spring moment at each bone's joint."""
+        mom = (self.k_spring * q + self.hold).reshape(-1, 2)
+        return np.sqrt((mom * mom).sum(1))

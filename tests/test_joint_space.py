@@ -1,0 +1,151 @@
+"""The linear tier's joint-space algebra against independent computations:
+kinetic energy of the bones, virtual power of the loads, numerical
+derivatives of the right-hand side, dense solves."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from treebake.pipeline import grow, prepare
+from treebake.scene import parse_scene
+from treebake.sim.common import Bones
+from treebake.sim.joint_space import JointSpace
+from treebake.sim.layout import ChainLayout
+from treebake.sim.loads import SceneLoads
+from treebake.sim.quality import QUALITIES
+from treebake.sim.treefactor import TreeFactor, ancestor_table, depths
+from treebake.sim.treesums import ChainSums
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def system(grammar: str, count: int = 1) -> JointSpace:
+    trees = [{"grammar": str(ROOT / "grammars" / grammar), "position": [10.0 * i, 0.0]}
+             for i in range(count)]
+    scene = parse_scene({"tree": trees, "wind": {"speed": 5.0}}, file="<test>")
+    loads = SceneLoads(scene)
+    sim, _, _, _ = prepare(scene, grow(scene), loads, QUALITIES["final"])
+    bones = Bones.of(sim)
+    layout = ChainLayout.of(sim, bones.offsets, bones.pivot0, bones.tip0)
+    return JointSpace(bones, layout, loads.g, 0.01, 1e-4)
+
+
+@pytest.fixture(scope="module", params=["sapling.lsys", "forest/broadleaf.lsys"])
+def js(request):
+    return system(request.param, count=2)  # two trees: one block-diagonal system
+
+
+def test_mass_matrix_is_the_bones_kinetic_energy(js):
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=js.n)
+    mass, _, _ = js.dense()
+    kin = js.kinematics(np.zeros(js.n), v)
+    pose = js.pose(kin, np.zeros(js.n))
+    b = js.bones
+    omega = kin[:, 6:9]
+    energy = 0.5 * (b.mass * (pose.vcom**2).sum(1)).sum() + 0.5 * np.einsum(
+        "bi,bij,bj->", omega, b.inertia, omega)
+    assert 0.5 * v @ mass @ v == pytest.approx(energy, rel=1e-12)
+
+
+def test_loads_do_the_work_of_the_forces(js):
+    """At rest, J^T F . v = sum F . (velocity of each COM)."""
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=js.n)
+    force = rng.normal(size=(js.bones.n, 3))
+    zero = np.zeros(js.n)
+    kin = js.kinematics(zero, v)
+    pose = js.pose(kin, zero)
+    _, damping, _ = js.dense()
+    tau = js.rhs(force, kin, pose, zero) + js.hold + damping @ v
+    assert tau @ v == pytest.approx((force * pose.vcom).sum(), rel=1e-10)
+
+
+def test_damping_is_each_limbs_block_of_the_mass_matrix(js):
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=js.n)
+    mass, damping, _ = js.dense()
+    limb = js.layout.bone_chain[js.dof_bone]
+    block = np.where(limb[:, None] == limb[None, :], mass, 0.0) * js.alpha[:, None]
+    assert np.allclose(damping, block)
+    got = js.alpha * js.limb_momentum(js.kinematics(np.zeros(js.n), v))
+    assert np.allclose(got, block @ v, rtol=1e-10, atol=1e-10 * np.abs(block @ v).max())
+
+
+def test_tangent_stiffness_is_the_derivative_of_the_right_hand_side(js):
+    """K_s + K_g (in the implicit matrix) = -d(rhs)/dq at rest, gravity and
+    prestress included: central differences on the exact right-hand side."""
+    b = js.bones
+    gravity = b.mass[:, None] * np.array([0.0, 0.0, -9.81])
+    zero = np.zeros(js.n)
+
+    def rhs(q):
+        kin = js.kinematics(q, zero)
+        return js.rhs(gravity, kin, js.pose(kin, q), q)
+
+    assert np.abs(rhs(zero)).max() < 1e-9 * np.abs(js.hold).max()  # prestress: at rest
+    _, _, stiffness = js.dense()
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        d = rng.normal(size=js.n) * 1e-6
+        num = -(rhs(d) - rhs(-d)) / 2
+        assert np.allclose(num, stiffness @ d, rtol=1e-4, atol=1e-5 * np.abs(stiffness @ d).max())
+
+
+def test_factor_solves_the_implicit_matrix(js):
+    mass, damping, stiffness = js.dense()
+    a = mass + 0.01 * damping + 1e-4 * stiffness
+    b = np.random.default_rng(5).normal(size=js.n)
+    assert np.allclose(js.factor.solve(b), np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
+    assert np.allclose(js.mass_factor.solve(b), np.linalg.solve(mass, b), rtol=1e-9,
+                       atol=1e-12)
+
+
+def test_tree_sums_and_factor_on_a_random_tree():
+    rng = np.random.default_rng(6)
+    parent, chains, level = [], [], []
+
+    def chain(p, lev, length):
+        out = []
+        for _ in range(length):
+            parent.append(p)
+            p = len(parent) - 1
+            out.append(p)
+        chains.append(np.array(out))
+        level.append(lev)
+        return out
+
+    for a in chain(-1, 0, 9)[1::2]:
+        for b in chain(a, 1, int(rng.integers(1, 6)))[::2]:
+            chain(b, 2, int(rng.integers(1, 4)))
+    parent = np.array(parent)
+    n = len(parent)
+    chain_parent = np.array([parent[c[0]] for c in chains])
+    sums = ChainSums(chains, chain_parent, np.array(level), n)
+    x = rng.normal(size=(n, 2))
+    pre, suf = x.copy(), x.copy()
+    for j in range(n):
+        if parent[j] >= 0:
+            pre[j] += pre[parent[j]]
+    for j in range(n - 1, -1, -1):
+        if parent[j] >= 0:
+            suf[parent[j]] += suf[j]
+    assert np.allclose(sums.prefix(x), pre)
+    assert np.allclose(sums.suffix(x), suf)
+    depth = depths(parent)
+    anc = ancestor_table(parent, depth)
+    a = 0.1 * np.eye(n)
+    for j in range(n):  # SPD with entries only between ancestors
+        path = [j, *anc[j, :depth[j]]]
+        u = np.zeros(n)
+        u[path] = rng.normal(size=len(path))
+        a += np.outer(u, u)
+    lower = np.zeros((n, max(depth.max(), 1)))
+    for j in range(n):
+        lower[j, :depth[j]] = a[j, anc[j, :depth[j]]]
+    factor = TreeFactor(parent, np.diag(a).copy(), lower, chains, np.array(level))
+    b = rng.normal(size=n)
+    assert np.allclose(factor.solve(b), np.linalg.solve(a, b))
