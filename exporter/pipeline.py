@@ -23,7 +23,7 @@ from .sim.quality import QUALITIES, Quality
 from .sim.common import SimTree, TreeMotion, cap_note
 from .sim.debris import MAX_SPIN
 from .sim.loads import SceneLoads
-from .sim.planar import MAX_REFINE
+from .sim.chains.forces import MAX_REFINE
 from .turtle import interpret
 
 

@@ -128,7 +128,6 @@ from .common import (
     TreeMotion,
     cap_loads,
     cap_note,
-    hinge_axes,
     locate,
 )
 from .contact import FRICTION

@@ -23,7 +23,7 @@ from ..scene import Scene
 from .quality import Quality
 from .common import SimTree, TreeMotion
 from .loads import SceneLoads
-from .planar import PlanarSolver, Stats
+from .chains import PymunkTier, Stats
 
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
@@ -65,7 +65,7 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
 def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                     extent: np.ndarray, log=None, progress=None) -> ChunkResult:
     loads = SceneLoads(scene, extent)
-    sim = PlanarSolver(trees, scene, quality, loads, log=log)
+    sim = PymunkTier(trees, scene, quality, loads, log=log)
     motions = sim.run(progress)
     objects = None
     if sim.projectiles is not None:

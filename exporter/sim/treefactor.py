@@ -74,7 +74,7 @@ class TreeFactor:
 
     def __init__(self, parent: np.ndarray, diagonal: np.ndarray, lower: np.ndarray,
                  chains: list[np.ndarray], chain_level: np.ndarray):
-        self.n = n = len(parent)
+        self.n = len(parent)
         self.depth = depths(parent)
         self.ancestor = ancestor_table(parent, self.depth)
         rows, diag = self._factor(diagonal.astype(float), lower.astype(float))

@@ -1,0 +1,223 @@
+"""The pymunk tier's events: breaking joints, parts becoming rigid debris,
+felling (cut, hinge, fall), and trees going to sleep."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..debris import SLEEP_TIME
+from .build import LIMIT, PIVOT, SPRING
+
+FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
+SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
+STILL_SPEED = 0.005  # m/s and rad/s: the same for a standing tree no load reaches any more
+
+
+class ChainEvents:
+    """Breaks, felling, debris and sleep (mixed into PymunkTier)."""
+
+    def check_breaks(self, t: float, pose: dict) -> None:
+        """Break every joint whose bending moment exceeds its strength: the
+        spring's moment in each plane, plus the cone limit's when engaged."""
+        cand = np.nonzero(self.breakable)[0]
+        if not len(cand):
+            return
+        s = self.state
+        j = self.prev_body[cand]
+        rel = s[cand, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
+        moment = self.k[self.body_bone[cand]] * (rel + self.rest[cand])
+        at_limit = np.abs(rel) > 0.98 * self.cone[self.body_bone[cand]]
+        for i in np.nonzero(at_limit)[0]:
+            limit = self.joints[cand[i]][LIMIT]
+            if limit is not None:
+                moment[i] += math.copysign(limit.impulse / self.h, moment[i])
+        bones = self.body_bone[cand]
+        total = np.sqrt(np.bincount(bones, moment * moment, minlength=self.n))
+        over = np.nonzero((total > self.strength) & self.joint_alive & ~self.in_debris)[0]
+        for b in over:
+            if self.joint_alive[b] and not self.in_debris[b]:
+                self.break_joint(int(b), t, pose, f"broke ({total[b]:.0f} N m > strength "
+                                                  f"{self.strength[b]:.0f} N m)")
+
+    def _remove_joint(self, body: int, which: tuple[int, ...] = (PIVOT, SPRING, LIMIT)) -> None:
+        if PIVOT in which:
+            self.pivot_alive[body] = False
+        for w in which:
+            c = self.joints[body][w]
+            if c is not None:
+                self.space.remove(c)
+                self.joints[body][w] = None
+
+    def break_joint(self, bone: int, t: float, pose: dict, why: str) -> None:
+        """Remove the joint at a bone's base. In a root chain the part above
+        falls on as a free planar chain; elsewhere the broken-off part (with
+        everything it carries) becomes rigid debris."""
+        self.joint_alive[bone] = False
+        tree = self.locate(bone)[0]
+        path = self.bone_path(bone)
+        self.events.append((t, tree, f"{path}: {why}"))
+        self.stats.broken += 1
+        freed = self._outboard(bone)
+        if self.parent[bone] < 0:  # uprooted
+            self._rigid_lumps(int(self.bone_tree[bone]))
+        if self.bone_frame[bone] < 0:
+            for k in range(self.planes_of_bone[bone]):
+                i = self.body_of[(bone, k)]
+                self._remove_joint(i)
+                self.breakable[i] = False
+            self.row_start[bone] = True
+            self._layout()
+            self._fall_plane(self.chain_bones[self.bone_chain[bone]][freed[
+                self.chain_bones[self.bone_chain[bone]]]])
+        else:
+            self._to_debris(freed, pose)
+        self._unload(freed)
+
+    def _fall_plane(self, bones: np.ndarray) -> None:
+        """A stem that falls free turns through a large angle: two planes
+        only combine small rotations, so from here it moves in its first
+        plane (the load's, or the felling direction) alone; the small
+        deflection it had in the other plane is dropped."""
+        for b in bones:
+            for k in range(1, self.planes_of_bone[b]):
+                i = self.body_of[(int(b), k)]
+                self._remove_joint(i)
+                self.breakable[i] = False
+                if self.in_space[i]:
+                    self.space.remove(self.bodies[i])
+                self.state[i] = [*self.q0[i], 0.0, 0.0, 0.0, 0.0]
+            self.planes_of_bone[b] = 1
+        b0, b1, _ = self.plane_rows
+        b1 = b1.copy()
+        b1[bones] = -1
+        self.plane_rows = (b0, b1, np.nonzero(b1 >= 0)[0])
+        self._buffers()
+
+    def _outboard(self, bone: int) -> np.ndarray:
+        """A bone and every bone it carries (later in its chain, and their
+        attached chains)."""
+        freed = np.zeros(self.n, dtype=bool)
+        freed[bone] = True
+        chain = self.chain_bones[self.bone_chain[bone]]
+        freed[chain[np.nonzero(chain == bone)[0][0]:]] = True
+        for b in range(bone + 1, self.n):  # parents precede children
+            if not freed[b] and self.parent[b] >= 0 and freed[self.parent[b]]:
+                freed[b] = True
+        return freed
+
+    def _to_debris(self, freed: np.ndarray, pose: dict, asleep: bool = False) -> None:
+        bones = np.nonzero(freed & ~self.in_debris)[0]
+        self.debris.add(bones, pose, asleep)
+        self.in_debris[bones] = True
+        self.stats.debris += 1
+        for b in bones:
+            for k in range(self.planes_of_bone[b]):
+                i = self.body_of[(int(b), k)]
+                self._remove_joint(i)
+                self.breakable[i] = False
+                if self.in_space[i]:
+                    self.space.remove(self.bodies[i])
+        self._buffers()
+
+    def _unload(self, freed: np.ndarray) -> None:
+        """The freed part no longer loads the chains it hung on: drop it from
+        their lumps and load pairs."""
+        keep = ~(freed[self.pair_dsc] & ~freed[self.pair_anc])
+        changed = np.unique(self.pair_anc[~keep])
+        self.pair_anc, self.pair_dsc = self.pair_anc[keep], self.pair_dsc[keep]
+        self.pair_weight = self.pair_weight[keep]
+        self._lump()
+        for a in changed:
+            self._relump(int(a))
+        self._refresh_cog()
+
+    def settle(self, t: float, pose: dict, dt: float) -> None:
+        """Put trees at rest to sleep, as one sleeping rigid body each: a
+        fallen tree (stem off its root) slower than SETTLE_SPEED for
+        SLEEP_TIME (lying on the ground it would keep the solver at contact
+        rate), and a standing one slower than STILL_SPEED once no load that
+        changes will reach it again (after a blast, a pull, a passing gust
+        front)."""
+        for ti in range(len(self.trees)):
+            bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
+            awake = bones[~self.in_debris[bones]]
+            if not len(awake):
+                continue
+            roots = bones[self.parent[bones] < 0]
+            fallen = not self.joint_alive[roots].any()
+            if fallen:
+                limit = SETTLE_SPEED
+            elif t >= self.quiet[ti] and self.trees[ti].cut is None:
+                limit = STILL_SPEED
+            else:
+                self.still_time[ti] = 0.0
+                continue
+            speed = max(np.abs(pose["vcom"][awake]).max(), np.abs(pose["omega"][awake]).max())
+            self.still_time[ti] = self.still_time[ti] + dt if speed < limit else 0.0
+            if self.still_time[ti] > SLEEP_TIME:
+                freed = np.zeros(self.n, dtype=bool)
+                freed[awake] = True
+                self._to_debris(freed, pose, asleep=True)
+                what = "came to rest on the ground" if fallen else "at rest: asleep"
+                self.events.append((t, self.trees[ti].name, what))
+
+    def _nudge(self, root: int, w: float) -> None:
+        """Turn a root chain (plane 0) as one rigid body about its pivot at
+        `w` rad/s (negative tips the top toward +e): every body gets the
+        velocity of that rotation, so the push is not undone by the joints."""
+        pivot = self.bodies[self.body_of[(root, 0)]].position
+        for b in self.chain_bones[self.bone_chain[root]]:
+            body = self.bodies[self.body_of[(int(b), 0)]]
+            cog = body.local_to_world(body.center_of_gravity)
+            body.angular_velocity = w
+            body.velocity = (-w * (cog.y - pivot.y), w * (cog.x - pivot.x))
+
+    def _rigid_lumps(self, tree: int) -> None:
+        """A falling tree turns as one body, not about its sway frequency: its
+        children's apparent mass (a sway quantity) gives way to plain rigid
+        lumping, or the fall would be slowed by their extra inertia."""
+        lo, hi = self.offsets[tree], self.offsets[tree + 1]
+        mine = (self.pair_anc >= lo) & (self.pair_anc < hi)
+        if not mine.any() or np.all(self.pair_weight[mine] == 1.0):
+            return
+        self.pair_weight = np.where(mine, 1.0, self.pair_weight)
+        self._lump()
+        for a in np.unique(self.pair_anc[mine]):
+            self._relump(int(a))
+        self._refresh_cog()
+
+    def handle_cuts(self, t: float) -> None:
+        """Felling: at the cut the root joints lose spring and cone (the
+        hinge holds) and the tree is nudged toward the felling direction;
+        past `hinge` degrees of lean the hinge snaps and it falls free."""
+        for ti, tree in enumerate(self.trees):
+            cut = tree.cut
+            if cut is None:
+                continue
+            roots = [int(self.chain_bones[ci][0]) for ci in range(len(self.chain_bones))
+                     if self.chain_tree[ci] == ti and self.chain_parent[ci] < 0]
+            state = self.cut_state.get(ti, "standing")
+            if state == "standing" and t >= cut.time:
+                self._rigid_lumps(ti)
+                for b in roots:
+                    # plane 0 contains the felling direction: the notch frees
+                    # it; sideways (plane 1) the hinge wood still holds
+                    i = self.body_of[(b, 0)]
+                    self._remove_joint(i, (SPRING, LIMIT))
+                    for k in range(self.planes_of_bone[b]):
+                        self.breakable[self.body_of[(b, k)]] = False
+                    self._nudge(b, FELL_NUDGE)
+                self.cut_state[ti] = "hinged"
+                self.events.append((t, tree.name, "cut at the base"))
+            elif state == "hinged":
+                lean = max(abs(self.state[self.body_of[(b, 0)], 2]) for b in roots)
+                if lean > math.radians(cut.hinge):
+                    for b in roots:
+                        self.joint_alive[b] = False
+                        for k in range(self.planes_of_bone[b]):
+                            self._remove_joint(self.body_of[(b, k)])
+                        self._fall_plane(self.chain_bones[self.bone_chain[b]])
+                    self.cut_state[ti] = "falling"
+                    self.events.append((t, tree.name, "hinge snapped"))

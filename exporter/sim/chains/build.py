@@ -1,0 +1,326 @@
+"""The pymunk tier's construction: chains of 2D bodies, one per bone and
+bending plane, with pivots, damped rotary springs and cone limits; what a
+body carries (lumping), the grids the reconstruction walks, the prestress
+and the stability rule (stability.py)."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import fields
+
+import numpy as np
+import pymunk
+from pymunk import batch
+
+from ...rotations import cross
+from ..common import Bones
+from ..layout import ChainLayout
+from ..stability import inertia_floor
+
+EYE = np.eye(3)
+PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
+
+
+def apparent_mass(r: float, zeta: float) -> float:
+    """The in-phase (real) part of the apparent mass of a damped oscillator
+    driven at its base, per unit of its mass, at r = driving frequency /
+    its own frequency: ((1 - r^2) + 4 zeta^2 r^2) / ((1 - r^2)^2 + 4 zeta^2 r^2),
+    clipped to [1, 3]. Above 1 when the child is stiffer than the motion (it
+    sways along, amplified): the one-way coupling's stand-in for the
+    children's push back. A softer child would lag behind (below 1), but
+    its frequency estimate ignores gravity's pendulum stiffness (hanging
+    twigs), so it is carried as rigid instead."""
+    q = 1.0 - r * r
+    z = 4.0 * zeta * zeta * r * r
+    return float(np.clip((q + z) / (q * q + z), 1.0, 3.0))
+
+
+class ChainBuild:
+    """Construction and re-lumping (mixed into PymunkTier)."""
+
+    def _collect(self) -> None:
+        """The trees' rigs as global bone arrays (sim/common.py's Bones)."""
+        self.bones = Bones.of(self.trees)
+        for f in fields(Bones):  # as attributes: the solver reads them everywhere
+            setattr(self, f.name, getattr(self.bones, f.name))
+        self.n = self.bones.n
+        self.stats.bones = self.n
+
+    def _chains(self) -> None:
+        """Each rig limb is a chain (layout.py) with one or two bending planes."""
+        lay = self.layout = ChainLayout.of(self.trees, self.offsets, self.pivot0, self.tip0)
+        self.chain_bones = lay.chain_bones
+        self.chain_parent = lay.chain_parent.tolist()  # the bone a chain hangs on, -1 = ground
+        self.chain_tree = lay.chain_tree.tolist()
+        self.chain_planes = []  # (e, d) per plane
+        for ci, (e, d) in enumerate(zip(lay.chain_e, lay.chain_d)):
+            planes = self.trees[self.chain_tree[ci]].planes
+            self.chain_planes.append([(e, d)] if planes == 1 else [(e, d), (cross(e, d), d)])
+        self.bone_chain = lay.bone_chain
+        self.chain_parent_arr = lay.chain_parent
+        self.chain_first = lay.chain_first
+        self.bone_frame = lay.bone_frame  # the bone whose frame a bone's chain moves in
+
+    def _lumping(self) -> None:
+        """Lumped bodies: a bone plus the chains attached to it, carried as
+        if rigid. Each pair (attach bone a, descendant d) adds d to a's lump:
+        its true mass for gravity and the prestress; for inertia, its mass
+        times the apparent-mass factor of the child chain it hangs in
+        (apparent_mass), so a soft crown slows the stem as it does when it
+        sways along."""
+        omega = np.concatenate([t.rig.limb_omega for t in self.trees]) if self.trees else \
+            np.zeros(0)
+        zeta = self.alpha[self.chain_first] / np.maximum(2 * omega, 1e-9)
+        factor = np.ones(len(self.chain_bones))
+        for ci, p in enumerate(self.chain_parent):
+            if p >= 0:
+                r = omega[self.bone_chain[p]] / max(omega[ci], 1e-9)
+                factor[ci] = apparent_mass(r, zeta[ci]) \
+                    if self.quality.coupling == "apparent" else 1.0
+        anc, dsc, via = [], [], []
+        for b in range(self.n):
+            below, p = b, self.bone_frame[b]
+            while p >= 0:
+                anc.append(p)
+                dsc.append(b)
+                via.append(self.bone_chain[below])
+                below, p = p, self.bone_frame[p]
+        order = np.lexsort((dsc, anc))
+        self.pair_anc = np.asarray(anc, dtype=np.int64)[order]
+        self.pair_dsc = np.asarray(dsc, dtype=np.int64)[order]
+        self.pair_weight = factor[np.asarray(via, dtype=np.int64)[order]] if anc else np.zeros(0)
+        self.chain_factor = factor
+        self._lump()
+
+    def _lump(self) -> None:
+        """Lumped masses, COGs and inertias from the current pairs."""
+        n, m, c = self.n, self.mass, self.com0
+        a, d, w = self.pair_anc, self.pair_dsc, self.pair_weight
+
+        def add(own: np.ndarray, each: np.ndarray, weight: np.ndarray) -> np.ndarray:
+            width = int(np.prod(own.shape[1:]))
+            flat = each.reshape(len(each), width) * weight[:, None]
+            out = own.reshape(n, width).copy()
+            for k in range(out.shape[1]):
+                out[:, k] += np.bincount(a, flat[:, k], minlength=n)
+            return out.reshape(own.shape)
+
+        ones = np.ones(len(a))
+        self.true_mass = add(m, m[d], ones)
+        self.true_cog0 = add(m[:, None] * c, m[d, None] * c[d], ones) / self.true_mass[:, None]
+        lm = add(m, m[d], w)
+        lmc = add(m[:, None] * c, m[d, None] * c[d], w)
+        j_own = self.inertia + m[:, None, None] * (
+            (c * c).sum(1)[:, None, None] * EYE - c[:, :, None] * c[:, None, :])
+        lj = add(j_own, j_own[d], w)
+        self.lump_mass = lm
+        self.lump_cog0 = lmc / lm[:, None]
+        g = self.lump_cog0
+        self.lump_inertia = lj - lm[:, None, None] * (
+            (g * g).sum(1)[:, None, None] * EYE - g[:, :, None] * g[:, None, :])
+
+    def _levels(self) -> None:
+        """Chains grouped by depth, for the 3D reconstruction level by level."""
+        depth = []
+        for p in self.chain_parent:
+            depth.append(0 if p < 0 else depth[self.bone_chain[p]] + 1)
+        self.chain_depth = np.asarray(depth, dtype=np.int64)
+        self.row_start = np.zeros(self.n, dtype=bool)  # a bone starts a (sub)chain row
+        self.row_start[self.chain_first] = True
+        self._layout()
+
+    def _layout(self) -> None:
+        """Per depth, a padded grid (rows x length) of sub-chains (a chain
+        splits into rows where a joint has broken), and the rest-pose
+        quantities the reconstruction needs, computed once."""
+        self.levels = []
+        for depth in range(int(self.chain_depth.max()) + 1 if len(self.chain_depth) else 0):
+            rows = []
+            for ci in np.nonzero(self.chain_depth == depth)[0]:
+                bones = self.chain_bones[ci]
+                starts = [i for i, b in enumerate(bones) if self.row_start[b]]
+                for a, z in zip(starts, [*starts[1:], len(bones)]):
+                    rows.append(bones[a:z])
+            grid = np.full((len(rows), max(len(r) for r in rows)), -1, dtype=np.int64)
+            for i, r in enumerate(rows):
+                grid[i, :len(r)] = r
+            valid = grid >= 0
+            bones = grid[valid]
+            heads = grid[:, 0]
+            p = self.bone_frame[bones]
+            has = p >= 0
+            first = self.chain_first[self.bone_chain[bones]]
+            head_first = self.chain_first[self.bone_chain[heads]]
+            self.levels.append({
+                "grid": grid, "valid": valid, "bones": bones, "heads": heads,
+                "head_pos": np.searchsorted(np.flatnonzero(valid.ravel()),
+                                            np.arange(len(rows)) * grid.shape[1]),
+                "p": p, "has": has, "pp": p[has], "any": bool(has.any()),
+                "attach_rest": self.pivot0[first],
+                "attach_arm": self.pivot0[first[has]] - self.pivot0[p[has]],
+                "head_arm": self.pivot0[heads] - self.pivot0[head_first],
+                "step": self.tip0[bones] - self.pivot0[bones]})
+        self._refresh_cog()
+
+    def _refresh_cog(self) -> None:
+        """Rest offsets of the lumped COGs (they change when a part breaks off)."""
+        arm = self.lump_cog0 - self.pivot0
+        for level in self.levels:
+            level["cog_arm"] = arm[level["bones"]]
+
+    def _space(self) -> None:
+        """pymunk bodies and joints, rest angles (prestress), stability rule."""
+        q, h = self.quality, self.h
+        space = pymunk.Space()
+        space.iterations = q.iterations
+        self.space = space
+        body_bone, body_plane, e_rows, d_rows = [], [], [], []
+        self.body_of: dict[tuple[int, int], int] = {}
+        for ci, bones in enumerate(self.chain_bones):
+            for k, (e, d) in enumerate(self.chain_planes[ci]):
+                for b in bones:
+                    self.body_of[(int(b), k)] = len(body_bone)
+                    body_bone.append(int(b))
+                    body_plane.append(k)
+                    e_rows.append(e)
+                    d_rows.append(d)
+        nb = len(body_bone)
+        self.stats.bodies = nb
+        self.body_bone = np.asarray(body_bone, dtype=np.int64)
+        self.body_plane = np.asarray(body_plane, dtype=np.int64)
+        self.body_e = np.asarray(e_rows).reshape(nb, 3)
+        self.body_d = np.asarray(d_rows).reshape(nb, 3)
+        self.body_n = cross(self.body_e, self.body_d)
+        self.planes_of_bone = np.maximum(np.bincount(self.body_bone, minlength=self.n), 1)
+        self.body_of_bone0 = np.asarray([self.body_of[(b, 0)] for b in range(self.n)],
+                                        dtype=np.int64)
+        b1 = np.asarray([self.body_of.get((b, 1), -1) for b in range(self.n)], dtype=np.int64)
+        self.plane_rows = (self.body_of_bone0, b1, np.nonzero(b1 >= 0)[0])
+        first = self.chain_first[self.bone_chain[self.body_bone]]
+        origin = self.pivot0[first]  # a chain's 2D origin: its base at rest
+
+        def to2d(p):
+            return np.stack([((p - origin) * self.body_e).sum(1),
+                             ((p - origin) * self.body_d).sum(1)], 1)
+
+        self.q0 = to2d(self.pivot0[self.body_bone])
+        self.cog2d0 = to2d(self.lump_cog0[self.body_bone])
+        lm = self.lump_mass[self.body_bone]
+        self.i_n = np.einsum("bi,bij,bj->b", self.body_n, self.lump_inertia[self.body_bone],
+                             self.body_n)
+        prev = np.full(nb, -1, dtype=np.int64)
+        for ci, bones in enumerate(self.chain_bones):
+            for k in range(len(self.chain_planes[ci])):
+                for a, b in itertools.pairwise(bones):
+                    prev[self.body_of[(int(b), k)]] = self.body_of[(int(a), k)]
+        self.prev_body = prev
+        self.rest = self._prestress() if self.scene.prestress else np.zeros(nb)
+        # stability rule: floor each body's rotary inertia by its stiffest joint
+        kb = self.k[self.body_bone]
+        k_max = kb.copy()
+        has = prev >= 0
+        np.maximum.at(k_max, prev[has], kb[has])
+        floor = inertia_floor(k_max, h, q.stability)
+        self.i_eff = np.maximum(np.maximum(self.i_n, floor), 1e-12)
+        floored = floor > self.i_n
+        self.stats.inertia_floored = int(floored.sum())
+        self.stats.max_inertia_ratio = float(
+            (self.i_eff / np.maximum(self.i_n, 1e-12)).max()) if nb else 1.0
+        # damping: c = k h / 2 on the springs; mass-proportional alpha as an
+        # exact exponential decay over a force interval
+        c = 0.5 * h * kb
+        self.body_alpha = self.alpha[self.body_bone]
+        self.body_mass = lm
+        # Chipmunk corrects 10 % of a joint's position error per 1/60 s by
+        # default; fast spins drift pivots apart faster (the velocity
+        # constraint is linear), so correct a fraction per substep instead
+        error_bias = (1.0 - q.joint_correction) ** (1.0 / h)
+        self.bodies: list[pymunk.Body] = []
+        self.joints: list[list] = []
+        static = space.static_body
+        for i in range(nb):
+            body = pymunk.Body(float(lm[i]), float(self.i_eff[i]))
+            # the centre of gravity first: Chipmunk keeps the COG's world
+            # position when it is set, so setting it after the position
+            # would move the body's origin (the pivot) by -cog
+            body.center_of_gravity = tuple((self.cog2d0[i] - self.q0[i]).tolist())
+            body.position = tuple(self.q0[i].tolist())
+            space.add(body)
+            self.bodies.append(body)
+            other = self.bodies[prev[i]] if prev[i] >= 0 else static
+            b = int(self.body_bone[i])
+            pivot = pymunk.PivotJoint(other, body, tuple(self.q0[i].tolist()))
+            spring = pymunk.DampedRotarySpring(other, body, float(self.rest[i]), float(self.k[b]),
+                                               float(c[i]))
+            limit = pymunk.RotaryLimitJoint(other, body, -float(self.cone[b]),
+                                            float(self.cone[b]))
+            pivot.error_bias = limit.error_bias = error_bias
+            space.add(pivot, spring, limit)
+            self.joints.append([pivot, spring, limit])
+        self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
+        self._buffers()
+
+    def _prestress(self) -> np.ndarray:
+        """Spring rest angles that hold every chain in its grown shape under
+        gravity: each joint's rest angle is the gravity torque of everything
+        outboard of it (lumped) over k. DampedRotarySpring drives
+        (a.angle - b.angle) to the rest angle, a being the previous body."""
+        g = self.loads.g
+        rest = np.zeros(len(self.body_bone))
+        g2d = np.stack([self.body_e @ g, self.body_d @ g], 1)
+        first = self.chain_first[self.bone_chain[self.body_bone]]
+        origin = self.pivot0[first]
+        rel = self.true_cog0[self.body_bone] - origin
+        cog2d = np.stack([(rel * self.body_e).sum(1), (rel * self.body_d).sum(1)], 1)
+        lm = self.true_mass[self.body_bone]
+        for ci, bones in enumerate(self.chain_bones):
+            for k in range(len(self.chain_planes[ci])):
+                idx = np.asarray([self.body_of[(int(b), k)] for b in bones])
+                fx, fy = lm[idx] * g2d[idx, 0], lm[idx] * g2d[idx, 1]
+                cx, cy = cog2d[idx, 0], cog2d[idx, 1]
+                sfx = np.cumsum(fx[::-1])[::-1]
+                sfy = np.cumsum(fy[::-1])[::-1]
+                smo = np.cumsum((cx * fy - cy * fx)[::-1])[::-1]
+                px, py = self.q0[idx, 0], self.q0[idx, 1]
+                torque = smo - (px * sfy - py * sfx)  # about each pivot, CCW positive
+                rest[idx] = torque / self.k[bones]
+        return rest
+
+    def _buffers(self) -> None:
+        """Map pymunk's body order (it changes when bodies are removed) to ours."""
+        buf = batch.Buffer()
+        batch.get_space_bodies(self.space, batch.BodyFields.BODY_ID, buf)
+        ids = np.frombuffer(buf.int_buf(), dtype=np.uintp)
+        index = {body.id: i for i, body in enumerate(self.bodies)}
+        self.row_of_body = np.full(len(self.bodies), -1, dtype=np.int64)
+        for row, bid in enumerate(ids.tolist()):
+            i = index.get(bid)
+            if i is not None:
+                self.row_of_body[i] = row
+        self.in_space = self.row_of_body >= 0
+        self.live_rows = self.row_of_body[self.in_space]
+        self.read_buf = batch.Buffer()
+        # the static body is an extra row once a constraint uses it
+        self.force_rows = np.zeros((len(ids), 3))
+        self.write_buf = batch.Buffer()
+        self.write_buf.set_float_buf(self.force_rows)
+
+    def _relump(self, bone: int) -> None:
+        """Give a body its new lumped mass after part of what it carried went."""
+        cog, total = self.lump_cog0[bone], self.lump_mass[bone]
+        for k in range(self.planes_of_bone[bone]):
+            i = self.body_of[(bone, k)]
+            body = self.bodies[i]
+            e, dd = self.body_e[i], self.body_d[i]
+            origin2d = self.pivot0[self.chain_first[self.bone_chain[bone]]]
+            c2 = np.array([(cog - origin2d) @ e, (cog - origin2d) @ dd])
+            floored = self.i_eff[i] > self.i_n[i]
+            self.i_n[i] = float(self.body_n[i] @ self.lump_inertia[bone] @ self.body_n[i])
+            if not floored:
+                self.i_eff[i] = self.i_n[i]
+            self.body_mass[i] = total
+            body.mass = float(total)
+            body.moment = float(self.i_eff[i])
+            origin = body.position  # setting the COG moves the origin: restore it
+            body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
+            body.position = origin

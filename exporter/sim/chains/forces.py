@@ -1,0 +1,179 @@
+"""The pymunk tier's loads: external loads on every bone, carried down to
+the bodies they hang on as if rigid, ground contact, d'Alembert forces of
+the moving frames and structural damping, written to the bodies in bulk."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...rotations import apply, apply_transposed, cross
+from ..common import cap_loads
+from ..contact import effective_mass, ground_forces
+from ..loads import BoneProps
+
+REFINE = 8  # pymunk steps per substep at least, while an impulsive load acts
+REFINE_SPIN = 0.002  # rad: the most a body may turn in one pymunk step
+MAX_REFINE = 32  # pymunk steps per substep at most
+CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
+
+
+class ChainForces:
+    """Loads and frame forces (mixed into PymunkTier)."""
+
+    def forces(self, t: float, pose: dict, prev: dict | None, since: float, dt: float) -> None:
+        """Evaluate all loads at time t and write them into the force buffer,
+        to be held for the next `dt` s; `prev` is the pose `since` s ago.
+        Steps the debris over `dt` with them."""
+        n = self.n
+        rot, com, cog = pose["rot"], pose["com"], pose["cog"]
+        axis = pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
+        force = self.loads.forces(t, com, pose["vcom"], axis, self.props, dt=dt)
+        pulls = self.bones.pull_forces(t)
+        if pulls is not None:
+            force += pulls
+        limited = self.stats.limited
+        force = cap_loads(force, self.mass, t, self.stats, self.locate)
+        hits = self.projectiles.hits if self.projectiles is not None else 0
+        if self.projectiles is not None:  # impulses on hit bones, both ways
+            self.projectiles.advance(t, dt, pose, self)
+        # an impulsive load (a blast front, a hit, a capped load) spins parts
+        # fast, and pivots drift by about (omega h)^2 r per step: step finer
+        # meanwhile, and while anything spins fast, so that no body turns
+        # more than REFINE_SPIN per step (up to MAX_REFINE steps a substep)
+        spin = float(np.abs(self.state[self.in_space, 5]).max(initial=0.0))
+        impulsive = self.loads.blast_active or self.stats.limited > limited or (
+            self.projectiles is not None and self.projectiles.hits > hits)
+        self.refine = int(min(MAX_REFINE, max(REFINE if impulsive else 1,
+                                              math.ceil(spin * self.h / REFINE_SPIN))))
+        if self.debris.count:
+            self.debris.step(dt, lambda c, v, ax: self._debris_loads(t, c, v, ax, dt))
+            force[self.debris.bones] = 0.0
+        # Lumped: a body also carries the loads of the chains attached to it,
+        # as if they were rigid: each acts where its COM would be if rigid.
+        # (At their actual, swinging positions the parent would get the
+        # gravity half of their reaction without the inertial half, a partial
+        # coupling that pumps energy into hanging twigs.)
+        ftot = force.copy()
+        torque = cross(com - cog, force)  # about each lumped COG
+        if len(self.pair_anc):
+            a, d = self.pair_anc, self.pair_dsc
+            rigid = pose["pivot"][a] + apply(rot[a], self.com0[d] - self.pivot0[a])
+            pair_torque = cross(rigid - cog[a], force[d])
+            for ax in range(3):
+                ftot[:, ax] += np.bincount(a, force[d, ax], minlength=n)
+                torque[:, ax] += np.bincount(a, pair_torque[:, ax], minlength=n)
+        if self.scene.ground:
+            contact = self._ground(pose, dt)
+            if contact is not None:
+                self._add_contact(contact, pose, ftot, torque)
+        bb = self.body_bone
+        f_b, t_b = ftot[bb], torque[bb]
+        fr = pose["frame_rot"][bb]
+        frame = self.bone_frame[bb]
+        moving = (frame >= 0) & ~self.in_debris[bb]
+        if prev is not None and moving.any():
+            # d'Alembert forces of the parent bone's accelerating frame
+            p = frame[moving]
+            child = bb[moving]
+            acc = (pose["vcog"][p] - prev["vcog"][p]) / since
+            alpha = (pose["omega"][p] - prev["omega"][p]) / since
+            w = pose["omega"][p]
+            r = cog[child] - cog[p]
+            v_rel = pose["vcog"][child] - pose["vcog"][p] - cross(w, r)
+            a_frame = (acc + cross(alpha, r) + cross(w, cross(w, r))
+                       + 2 * cross(w, v_rel))
+            f_b[moving] -= self.lump_mass[child][:, None] * a_frame
+            n_world = apply(fr[moving], self.body_n[moving])
+            t_b[moving] -= (self.i_n[moving] * (alpha * n_world).sum(1))[:, None] * n_world
+        f_loc = apply_transposed(fr, f_b)
+        t_loc = apply_transposed(fr, t_b)
+        # structural damping on the motion relative to the frame (pymunk's
+        # velocities): C = alpha M, as an exact decay over the interval, so
+        # that stiff, fast limbs can never overshoot
+        s = self.state
+        decay = -np.expm1(-self.body_alpha * dt) / dt
+        fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * s[:, 3]
+        fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * s[:, 4]
+        tz = (t_loc * self.body_n).sum(1) - decay * self.i_eff * s[:, 5]
+        out = self.force_rows
+        out[:] = 0.0
+        live = self.in_space
+        out[self.live_rows, 0] = fx[live]
+        out[self.live_rows, 1] = fy[live]
+        out[self.live_rows, 2] = tz[live]
+
+    def _debris_loads(self, t: float, com: np.ndarray, vcom: np.ndarray, axis: np.ndarray,
+                      dt: float) -> np.ndarray:
+        """Loads on the debris bones (gravity, air, blasts), capped."""
+        d = self.debris.bones
+        props = BoneProps(*(getattr(self.props, f)[d] for f in
+                            ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
+        force = self.loads.forces(t, com, vcom, axis, props)
+        return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])))
+
+    def _add_contact(self, contact, pose: dict, ftot: np.ndarray, torque: np.ndarray) -> None:
+        """Add ground contact forces to the touching bones and, through
+        their joints, to every body they hang on (a crown propping up a
+        fallen stem), each at the actual contact point."""
+        owner, point, f = contact
+        n, cog = self.n, pose["cog"]
+        bones = [owner]
+        points = [point]
+        forces = [f]
+        up = self.bone_frame[owner]
+        idx = np.arange(len(owner))
+        while True:
+            keep = up >= 0
+            if not keep.any():
+                break
+            idx, up = idx[keep], up[keep]
+            bones.append(up)
+            points.append(point[idx])
+            forces.append(f[idx])
+            up = self.bone_frame[up]
+        b = np.concatenate(bones)
+        p = np.concatenate(points)
+        fc = np.concatenate(forces)
+        tq = cross(p - cog[b], fc)
+        for ax in range(3):
+            ftot[:, ax] += np.bincount(b, fc[:, ax], minlength=n)
+            torque[:, ax] += np.bincount(b, tq[:, ax], minlength=n)
+
+    def _ground(self, pose: dict, dt: float):
+        """Ground contacts of the chain bones: every bone's tip, and the
+        base of every bone no longer held by its joint (a root bone's base
+        is its anchor, not a contact); debris handles its own. Returns the
+        touching bones, the contact points and the forces, or None."""
+        tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
+        loose = np.nonzero(~self.joint_alive)[0]
+        ends = np.concatenate([tips, pose["pivot"][loose]])
+        owner = np.concatenate([np.arange(self.n), loose])
+        low = ends[:, 2] < self.radius[owner] + CONTACT_MARGIN
+        near = (ends[:, 2] < self.radius[owner]) & ~self.in_debris[owner]
+        self.contact_active = bool((low & ~self.in_debris[owner]).any())
+        if not near.any():
+            return None
+        ends, owner = ends[near], owner[near]
+        arm = ends - pose["cog"][owner]
+        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
+        m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
+        f = ground_forces(ends, vel, self.radius[owner], m_eff, dt)
+        return owner, ends, f
+
+    def apply_impulse(self, bone: int, impulse: np.ndarray, point: np.ndarray,
+                      pose: dict) -> None:
+        """Apply a world impulse (N s) at a world point to a bone."""
+        if self.in_debris[bone]:
+            self.debris.impulse(int(np.nonzero(self.debris.bones == bone)[0][0]), impulse,
+                                point)
+            return
+        fr = pose["frame_rot"][bone]
+        j = fr.T @ impulse
+        x = fr.T @ (point - pose["attach"][bone])
+        for k in range(self.planes_of_bone[bone]):
+            i = self.body_of[(bone, k)]
+            e, d = self.body_e[i], self.body_d[i]
+            self.bodies[i].apply_impulse_at_world_point((float(j @ e), float(j @ d)),
+                                                        (float(x @ e), float(x @ d)))

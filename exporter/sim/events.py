@@ -1,0 +1,49 @@
+"""What happened during a simulation, as records both solvers share.
+
+An event is written to the bake's JSON as a record (time, tree, kind,
+segment, detail) and rendered as text only for people (logs, reports).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+# kinds of event
+CUT = "cut"  # felling: the notch is cut, the hinge holds
+HINGE = "hinge snapped"  # felling: the hinge wood broke, the stem falls free
+BROKE = "broke"  # a joint's bending moment passed its strength
+UPROOTED = "uprooted"  # a root joint broke
+AT_REST = "at rest"  # a fallen tree or a still one went to sleep
+TIER = "tier"  # the planar LOD moved a tree between its linear and pymunk tiers
+KINDS = (CUT, HINGE, BROKE, UPROOTED, AT_REST, TIER)
+
+
+@dataclass(frozen=True)
+class Event:
+    """At `time` s, on `tree`, `kind` (KINDS) at `segment` (its limb path,
+    e.g. "trunk/2:0"; "" for the whole tree), with `detail` for people."""
+
+    time: float
+    tree: str
+    kind: str
+    segment: str = ""
+    detail: str = ""
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"unknown event kind {self.kind!r}")
+
+    def record(self) -> dict:
+        out = asdict(self)
+        out["time"] = round(self.time, 6)
+        return out
+
+    @classmethod
+    def from_record(cls, data: dict) -> Event:
+        return cls(float(data["time"]), str(data["tree"]), str(data["kind"]),
+                   str(data.get("segment", "")), str(data.get("detail", "")))
+
+    def text(self) -> str:
+        where = f"{self.segment}: " if self.segment else ""
+        what = f"{self.kind} ({self.detail})" if self.detail else self.kind
+        return f"t = {self.time:.3f} s: {where}{what}"
