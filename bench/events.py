@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from treebake.pipeline import bake_scene  # noqa: E402
+from treebake.sim.events import Event  # noqa: E402
 from treebake.scene import load_scene, parse_scene  # noqa: E402
 from treebake.sway import segment_ends  # noqa: E402
 
@@ -57,7 +58,7 @@ def measure(bake, scene) -> dict:
             continue
         en = tree_energy(tb, bake.fps)
         events = tb.info.get("events", [])
-        broken = sum(1 for e in events if "broke" in str(e))
+        broken = sum(1 for e in events if e["kind"] in ("broke", "uprooted"))
         base = tb.rest_base
         reach = float(np.linalg.norm(en["mids"][-1, :, :2] - base[0, :2], axis=1).max())
         out["trees"].append({
@@ -66,7 +67,7 @@ def measure(bake, scene) -> dict:
             "com_start": round(float(en["com"][0, 2]), 3),
             "com_max_after_start": round(float(en["com"][1:, 2].max()), 3),
             "com_end": round(float(en["com"][-1, 2]), 3),
-            "broken": broken, "events": [str(e) for e in events][:6],
+            "broken": broken, "events": [Event.from_record(e).text() for e in events][:6],
             "farthest_part_m": round(reach, 2)})
     if bake.objects is not None:
         pos = bake.objects.positions.astype(float)

@@ -286,7 +286,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             info["static"] = static.get(g.model.name, "not simulated")
             pos, rot = segment_transforms(st_tree.rig, None, None)
         else:
-            info["events"] = motion.events
+            info["events"] = [e.record() for e in motion.events]
             pos, rot = segment_transforms(st_tree.rig, motion.quaternions, motion.pivots)
         trees.append(tree_bake_from_model(g.model, pos, rot, info))
     timing["wall_seconds"] = round(time.perf_counter() - started, 3)

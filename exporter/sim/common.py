@@ -91,7 +91,7 @@ class TreeMotion:
 
     quaternions: np.ndarray
     pivots: np.ndarray
-    events: list[str] = field(default_factory=list)
+    events: list = field(default_factory=list)  # events.Event records
 
 
 @dataclass

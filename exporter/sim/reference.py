@@ -132,6 +132,7 @@ from .common import (
 )
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
+from .events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
 from .loads import SceneLoads
 
 DEFAULT_TIMESTEP = 1 / 2000  # s
@@ -238,7 +239,7 @@ class ReferenceSolver:
         self.dt_force = self.h * self.force_every
         self.stats = Stats()
         self.timing = {"compile_seconds": 0.0, "step_seconds": 0.0, "update_seconds": 0.0}
-        self.events: list[tuple[float, int, str]] = []
+        self.events: list[Event] = []
         self._collect()
         self._joints()
         self._groups()
@@ -631,13 +632,15 @@ class ReferenceSolver:
                     self.damped[b, 0] = False  # the hinge turns freely
                 self._damping_pairs(g)
                 self.cut_state[ti] = "hinged"
-                self.events.append((t, ti, "cut at the base"))
+                self.events.append(Event(t, tree.name, CUT, self._path(roots[0]),
+                                         "the hinge holds"))
             elif state == "hinged":
                 lean = g.data.qpos[g.hinge_qpos[rows, 0]]
                 if lean.max() > math.radians(tree.cut.hinge):
                     self.attached[roots] = False
                     self.cut_state[ti] = "falling"
-                    self.events.append((t, ti, "hinge snapped"))
+                    self.events.append(Event(t, tree.name, HINGE, self._path(roots[0]),
+                                             f"lean {math.degrees(lean.max()):.0f} deg"))
                     freed.setdefault(gi, []).extend(int(b) for b in roots)
         for gi, g in enumerate(self.groups):
             cand = self.breakable[g.bones] & self.attached[g.bones]
@@ -650,9 +653,9 @@ class ReferenceSolver:
                 self.attached[b] = False
                 self.breakable[b] = False
                 ti, seg = int(self.bone_tree[b]), self.locate(b)[1]
-                why = (f"{self.paths[ti][seg]}: broke ({moment[i]:.0f} N m > strength "
-                       f"{self.strength[b]:.0f} N m)")
-                self.events.append((t, ti, why))
+                why = f"{moment[i]:.0f} N m > strength {self.strength[b]:.0f} N m"
+                kind = UPROOTED if self.parent[b] < 0 else BROKE
+                self.events.append(Event(t, self.trees[ti].name, kind, self.paths[ti][seg], why))
                 self.stats.broken += 1
                 freed.setdefault(gi, []).append(b)
         out = []
@@ -721,6 +724,10 @@ class ReferenceSolver:
         d.xfrc_applied[body] = 0.0
         g.bones = np.setdiff1d(g.bones, bones)
 
+    def _path(self, bone: int) -> str:
+        """The limb path of a global bone's first segment."""
+        return self.paths[int(self.bone_tree[bone])][self.locate(int(bone))[1]]
+
     def _roots(self, ti: int) -> np.ndarray:
         sl = np.arange(self.offsets[ti], self.offsets[ti + 1])
         return sl[self.parent[sl] < 0]
@@ -753,7 +760,8 @@ class ReferenceSolver:
             self.still_time[ti] = self.still_time[ti] + dt if speed < SETTLE_SPEED else 0.0
             if self.still_time[ti] > SETTLE_TIME:
                 self.settled[ti] = True
-                self.events.append((t, ti, "came to rest on the ground"))
+                self.events.append(Event(t, self.trees[ti].name, AT_REST, "",
+                                         "came to rest on the ground"))
 
     # ------------------------------------------------------------------
     # running
@@ -832,7 +840,7 @@ class ReferenceSolver:
         out = []
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
-            events = [f"t = {et:.3f} s: {msg}" for et, i, msg in self.events if i == ti]
+            events = [e for e in self.events if e.tree == tree.name]
             out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
         return out
 

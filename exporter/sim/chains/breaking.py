@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ..debris import SLEEP_TIME
+from ..events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
 from .build import LIMIT, PIVOT, SPRING
 
 FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
@@ -38,8 +39,8 @@ class ChainEvents:
         over = np.nonzero((total > self.strength) & self.joint_alive & ~self.in_debris)[0]
         for b in over:
             if self.joint_alive[b] and not self.in_debris[b]:
-                self.break_joint(int(b), t, pose, f"broke ({total[b]:.0f} N m > strength "
-                                                  f"{self.strength[b]:.0f} N m)")
+                self.break_joint(int(b), t, pose, f"{total[b]:.0f} N m > strength "
+                                                  f"{self.strength[b]:.0f} N m")
 
     def _remove_joint(self, body: int, which: tuple[int, ...] = (PIVOT, SPRING, LIMIT)) -> None:
         if PIVOT in which:
@@ -57,7 +58,8 @@ class ChainEvents:
         self.joint_alive[bone] = False
         tree = self.locate(bone)[0]
         path = self.bone_path(bone)
-        self.events.append((t, tree, f"{path}: {why}"))
+        kind = UPROOTED if self.parent[bone] < 0 else BROKE
+        self.events.append(Event(t, tree, kind, path, why))
         self.stats.broken += 1
         freed = self._outboard(bone)
         if self.parent[bone] < 0:  # uprooted
@@ -161,7 +163,7 @@ class ChainEvents:
                 freed[awake] = True
                 self._to_debris(freed, pose, asleep=True)
                 what = "came to rest on the ground" if fallen else "at rest: asleep"
-                self.events.append((t, self.trees[ti].name, what))
+                self.events.append(Event(t, self.trees[ti].name, AT_REST, "", what))
 
     def _nudge(self, root: int, w: float) -> None:
         """Turn a root chain (plane 0) as one rigid body about its pivot at
@@ -210,7 +212,8 @@ class ChainEvents:
                         self.breakable[self.body_of[(b, k)]] = False
                     self._nudge(b, FELL_NUDGE)
                 self.cut_state[ti] = "hinged"
-                self.events.append((t, tree.name, "cut at the base"))
+                self.events.append(Event(t, tree.name, CUT, self.bone_path(roots[0]),
+                                         "the hinge holds"))
             elif state == "hinged":
                 lean = max(abs(self.state[self.body_of[(b, 0)], 2]) for b in roots)
                 if lean > math.radians(cut.hinge):
@@ -220,4 +223,5 @@ class ChainEvents:
                             self._remove_joint(self.body_of[(b, k)])
                         self._fall_plane(self.chain_bones[self.bone_chain[b]])
                     self.cut_state[ti] = "falling"
-                    self.events.append((t, tree.name, "hinge snapped"))
+                    self.events.append(Event(t, tree.name, HINGE, self.bone_path(roots[0]),
+                                             f"lean {math.degrees(lean):.0f} deg"))

@@ -53,6 +53,7 @@ from ...rotations import quaternions_from_matrices
 from ...scene import Scene
 from ..common import SimTree, TreeMotion, locate
 from ..debris import Debris
+from ..events import Event
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
 from ..quality import Quality
@@ -122,7 +123,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         n = self.n
         quats = np.zeros((frames, n, 4))
         pivots = np.zeros((frames, n, 3))
-        self.events: list[tuple[float, str, str]] = []
+        self.events: list[Event] = []
         self.cut_state: dict[int, str] = {}
         self.joint_alive = np.ones(n, dtype=bool)
         self.in_debris = np.zeros(n, dtype=bool)
@@ -203,8 +204,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         out = []
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
-            events = [f"t = {et:.3f} s: {msg}" for et, name, msg in self.events
-                      if name == tree.name]
+            events = [e for e in self.events if e.tree == tree.name]
             out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
         return out
 
