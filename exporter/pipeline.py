@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .bake import Bake, ObjectsBake, tree_bake_from_model
+from .bake import Bake, tree_bake_from_model
 from .errors import InputError
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
@@ -20,10 +20,9 @@ from .rig import RigOptions, build_rig
 from .rotations import matrices_from_quaternions
 from .scene import Scene
 from .sim.quality import QUALITIES, Quality
-from .sim.common import SimTree, TreeMotion, cap_note
-from .sim.debris import MAX_SPIN
+from .sim.common import SimTree, TreeMotion
 from .sim.loads import SceneLoads
-from .sim.chains.forces import MAX_REFINE
+from .sim.projectiles import projectile_reaches
 from .turtle import interpret
 
 
@@ -96,25 +95,6 @@ def load_direction(scene: Scene, loads: SceneLoads, model: TreeModel,
     return None
 
 
-def projectile_reaches(scene: Scene, model: TreeModel) -> bool:
-    """Whether a projectile's ballistic path passes near the tree."""
-    lo, hi = model.bounds()
-    centre = 0.5 * (lo + hi)
-    radius = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2])) + 1.0
-    g = scene.gravity
-    for p in scene.projectiles:
-        pos = np.array(p.position, dtype=float)
-        vel = np.array(p.velocity, dtype=float)
-        for _ in range(2000):  # ballistic path until it lands, 10 ms steps
-            if np.linalg.norm(pos[:2] - centre[:2]) < radius + p.size and pos[2] < hi[2] + p.size:
-                return True
-            vel[2] -= g * 0.01
-            pos += vel * 0.01
-            if pos[2] < -1:
-                break
-    return False
-
-
 def tree_quality(scene: Scene, spec) -> Quality:
     return QUALITIES[spec.quality] if spec.quality else scene.quality
 
@@ -173,27 +153,6 @@ def prepare(scene: Scene, grown: list[GrownTree], loads: SceneLoads, quality: Qu
     return sim_trees, qualities, static, counts
 
 
-def _planar_notes(stats, quality: Quality, h: float) -> list[str]:
-    """What the planar LOD adapted or clamped, in words (never silently)."""
-    notes = []
-    if stats.inertia_floored:
-        notes.append(f"stability: rotary inertia raised on {stats.inertia_floored} of "
-                     f"{stats.bodies} bodies (up to {stats.max_inertia_ratio:.1f}x) to keep "
-                     f"omega*h <= {quality.stability:g} at h = {h * 1e3:.3f} ms")
-    if stats.limited:
-        notes.append(cap_note(stats))
-    if stats.refined:
-        notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
-                     "blast, a hit, a capped load or a fast spin acted (pivots drift with the "
-                     "square of the step)")
-    if stats.broken:
-        notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
-    if stats.debris_clamped:
-        notes.append(f"debris spin clamped at {MAX_SPIN:.0f} rad/s on {stats.debris_clamped} "
-                     "body substeps")
-    return notes
-
-
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
                log=None, progress=None, workers: int = 1,
                timestep: float | None = None) -> Bake:
@@ -225,54 +184,24 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
     motions: dict[str, TreeMotion] = {}
     objects = None
-    if active and solver == "planar":
-        from .sim.run import merge_stats, simulate
+    tiers: dict[str, str] = {}
+    if active:
+        if solver == "planar":
+            from .sim.lod import PlanarLOD
 
-        motions, chunks = simulate(sim_trees, qualities, scene, extent, workers, log, progress)
-        st = merge_stats(chunks)
-        meta["substep"] = min(c.h for c in chunks)
-        meta["force_interval"] = min(c.dt_update for c in chunks)
-        meta["chunks"] = len(chunks)
-        meta["stats"] = {k: v for k, v in asdict(st).items()
-                         if k not in ("notes", "step_seconds", "update_seconds", "first_limit",
-                                      "frame_seconds")}
-        meta["stats"]["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
-        meta["notes"] = _planar_notes(st, q, meta["substep"])
-        timing.update(step_seconds=round(st.step_seconds, 3),
-                      update_seconds=round(st.update_seconds, 3),
-                      segment_steps=sum(c.segments * c.stats.substeps for c in chunks),
-                      **frame_timing(st.frame_seconds, round(1.0 / (scene.fps * meta["substep"]))))
-        for c in chunks:
-            if c.objects is not None:
-                objects = ObjectsBake(*c.objects)
-    elif active and solver == "linear":
-        from .sim.linear import LinearSolver
-
-        lin = LinearSolver(sim_trees, scene, q, loads, log=log)
-        for tree, motion in zip(active, lin.run(progress)):
-            motions[tree.name] = motion
-        meta["substep"] = lin.h
-        meta["notes"] = []
-        timing.update(step_seconds=round(lin.stats.step_seconds, 3),
-                      update_seconds=round(lin.stats.update_seconds, 3),
-                      build_seconds=round(lin.stats.build_seconds, 3))
-    elif active:
-        try:
-            from .sim.reference import ReferenceSolver
-        except ImportError:
-            raise InputError("--solver full needs MuJoCo: pip install 'treebake[reference]'") \
-                from None
-        ref = ReferenceSolver(sim_trees, scene, q, loads, log=log, timestep=timestep)
-        for tree, motion in zip(active, ref.run(progress)):
-            motions[tree.name] = motion
-        meta.update(ref.meta())
-        timing.update({k: round(v, 3) for k, v in ref.timing.items()})
-        steps = np.asarray(ref.step_times)
-        if len(steps):
-            per_frame = steps[: len(steps) // ref.spf * ref.spf].reshape(-1, ref.spf).sum(1)
-            timing.update(segment_steps=sum(t.rig.model.n_segments for t in active) * len(steps),
-                          **frame_timing(per_frame, ref.spf))
-        objects = ref.objects()
+            sim = PlanarLOD(sim_trees, qualities, scene, extent, workers, log)
+        else:
+            try:
+                from .sim.reference import ReferenceSolver
+            except ImportError:
+                raise InputError("--solver full needs MuJoCo: pip install "
+                                 "'treebake[reference]'") from None
+            sim = ReferenceSolver(sim_trees, scene, q, loads, log=log, timestep=timestep)
+        result = sim.run(progress)
+        motions, objects, tiers = result.motions, result.objects, result.tiers
+        meta.update(result.meta)
+        meta["notes"] = result.notes
+        timing.update(result.timing)
     for note in meta.get("notes", []):
         log(note)
     trees = []
@@ -286,23 +215,12 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             info["static"] = static.get(g.model.name, "not simulated")
             pos, rot = segment_transforms(st_tree.rig, None, None)
         else:
+            info["solver"] = tiers.get(g.model.name, solver)
             info["events"] = [e.record() for e in motion.events]
             pos, rot = segment_transforms(st_tree.rig, motion.quaternions, motion.pivots)
         trees.append(tree_bake_from_model(g.model, pos, rot, info))
     timing["wall_seconds"] = round(time.perf_counter() - started, 3)
     return Bake(np.arange(frames) / scene.fps, trees, meta, objects, timing)
-
-
-def frame_timing(frame_seconds, substeps_per_frame: int) -> dict:
-    """Physics time per frame (mean, p95) and per substep of the finest
-    level (the frame's time over its substeps), ms."""
-    f = np.asarray(frame_seconds, dtype=float)
-    if not len(f):
-        return {}
-    mean, p95 = float(f.mean()), float(np.percentile(f, 95))
-    return {"frame_mean_ms": round(1e3 * mean, 4), "frame_p95_ms": round(1e3 * p95, 4),
-            "substep_mean_ms": round(1e3 * mean / substeps_per_frame, 5),
-            "substep_p95_ms": round(1e3 * p95 / substeps_per_frame, 5)}
 
 
 def _relative(path: Path, scene_file: str) -> str:

@@ -109,6 +109,15 @@ def matrices_from_quaternions(q: np.ndarray) -> np.ndarray:
     return r
 
 
+def rotvecs_from_matrices(r: np.ndarray) -> np.ndarray:
+    """Rotation vectors (N, 3) of rotation matrices (N, 3, 3), angles in [0, pi]."""
+    q = quaternions_from_matrices(r)  # w >= 0
+    s = np.linalg.norm(q[:, :3], axis=1)
+    angle = 2 * np.arctan2(s, q[:, 3])
+    scale = np.where(s > 1e-12, angle / np.maximum(s, 1e-300), 2.0)
+    return q[:, :3] * scale[:, None]
+
+
 # quaternion helpers (x y z w, float64, vectorised over leading axes)
 
 

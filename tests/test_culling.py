@@ -9,7 +9,7 @@ from treebake.bake import load_bake, save_bake
 from treebake.culling import cull, half_angle
 from treebake.pipeline import bake_scene
 from treebake.scene import CameraSpec, parse_scene
-from treebake.sim import run
+from treebake.sim import lod as run
 
 
 def test_cull_sees_in_front_not_behind_and_measures_distance():

@@ -120,17 +120,12 @@ class JointSpace:
         self.hold = self.tau_g0.copy() if hold is None else hold
         self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
 
-        def rows(low):
-            out = np.zeros(anc.shape)
-            out[jj, tt] = low
-            return out
-
+        self._shape = (anc.shape, jj, tt)
         # the solve runs chain by chain: a bone chain's dofs, in order
-        chains = [np.stack([2 * b, 2 * b + 1], 1).ravel() for b in layout.chain_bones]
-        level = layout.chain_depth
-        self.factor = TreeFactor(parent, m_diag + c1 * c_diag + c2 * k_diag,
-                                 rows(m_low + c1 * c_low + c2 * k_low), chains, level)
-        self.mass_factor = TreeFactor(parent, m_diag.copy(), rows(m_low), chains, level)
+        self._chains = [np.stack([2 * b, 2 * b + 1], 1).ravel() for b in layout.chain_bones]
+        self._factors: dict[tuple[float, float], TreeFactor] = {}
+        self.factor = self.factor_for(c1, c2)
+        self.mass_factor = self.factor_for(0.0, 0.0)
         # constants of the products
         self.cross_pivot = cross(self.axis, p)
         self.per_hinge = np.concatenate([self.axis, self.cross_pivot], 1).reshape(nb, 2, 6)
@@ -152,6 +147,18 @@ class JointSpace:
         self.lump = (l0, l1, np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3)
                      - l2 + li)
         self.axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
+
+    def factor_for(self, c1: float, c2: float) -> TreeFactor:
+        """The factored M + c1 C + c2 K (cached)."""
+        key = (c1, c2)
+        if key not in self._factors:
+            m_diag, m_low, c_diag, c_low, k_diag, k_low, _ii, _jj = self.matrices
+            shape, jj, tt = self._shape
+            rows = np.zeros(shape)
+            rows[jj, tt] = m_low + c1 * c_low + c2 * k_low
+            self._factors[key] = TreeFactor(self.parent, m_diag + c1 * c_diag + c2 * k_diag,
+                                            rows, self._chains, self.layout.chain_depth)
+        return self._factors[key]
 
     def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """M, C and the tangent stiffness K_s + K_g as dense matrices (checks)."""

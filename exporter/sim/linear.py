@@ -2,12 +2,19 @@
 space (joint_space.py) while they stay in the linear range.
 
 Stepping: Newmark's average-acceleration rule (the trapezoidal rule:
-unconditionally stable, no numerical damping, period error (omega h)^2/12),
-at the quality's `linear_rate`; loads are evaluated once per step at the
-predicted state, gravity's and the loads' dependence on the pose explicitly,
-with gravity's tangent stiffness in the implicit matrix. Poses at frames
-come from the hinge angles through the exact kinematics (two hinges per
-joint, composed down the tree).
+unconditionally stable, no numerical damping, period error (omega h)^2/12)
+at the quality's `linear_rate`; the loads are evaluated once per step at the
+predicted state, their and gravity's dependence on the pose explicitly, with
+gravity's tangent stiffness in the implicit matrix. While a blast acts, steps
+are split (BLAST_SPLIT): its pulse lasts milliseconds.
+
+A tree leaves this tier for the pymunk tier (chains/, with its pose and
+spin, `HandOff`) the step it leaves the linear range: a hinge past half its
+cone or a bone turned more than MAX_TURN from its grown pose, a joint's
+bending moment past BREAK_MARGIN of its strength (it may break), a branch
+tip reaching the ground, or its felling cut. Poses at frames come from the
+hinge angles through the exact kinematics (two hinges per joint, composed
+down the tree).
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import SimulationError
 from ..rotations import matrices_from_rotvec, quaternions_from_matrices
 from ..scene import Scene
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
@@ -28,51 +36,102 @@ from .quality import Quality
 from .treefactor import depths
 
 BETA, GAMMA = 0.25, 0.5  # Newmark's average acceleration
+MAX_TURN = 1.0  # rad: a bone turned further from its grown pose leaves the linear range
+CONE_FRACTION = 0.9  # a hinge past this fraction of its cone leaves it (the cone would act)
+BREAK_MARGIN = 0.8  # a joint whose moment passes this fraction of its strength leaves it
+CONTACT_MARGIN = 0.05  # m: a tip this close to the ground (and below its rest height) leaves it
+BLAST_SPLIT = 8  # steps per step while a blast acts
+
+
+@dataclass
+class HandOff:
+    """A tree leaving the linear tier at `substep` (in units of the pymunk
+    tier's substeps, counted from t = 0), in `rot` (B, 3, 3) relative to rest
+    and spinning at `omega` (B, 3) rad/s (its own bones), and why."""
+
+    tree: int  # index in the trees the tier was given
+    substep: int
+    rot: np.ndarray
+    omega: np.ndarray
+    reason: str
 
 
 @dataclass
 class LinearStats:
     steps: int = 0
     dofs: int = 0
+    rebuilds: int = 0
     limited: int = 0
     first_limit: tuple | None = None
+    split: int = 0  # steps split while a blast acted
     build_seconds: float = 0.0
     step_seconds: float = 0.0
     update_seconds: float = 0.0
     frame_seconds: list[float] = field(default_factory=list)
 
 
-class LinearSolver:
-    """Simulate the active trees of a scene with the linear tier."""
+class LinearTier:
+    """The linear tier for some trees of one quality. `pymunk_substeps`: the
+    pymunk tier's substeps per frame; the tier's own steps divide them, so a
+    tree can be handed over at any step."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None):
+                 pymunk_substeps: int, log=None):
         self.scene, self.quality, self.loads = scene, quality, loads
         self.log = log or (lambda msg: None)
-        self.trees = [t for t in trees if t.active]
+        self.trees = list(trees)
         self.stats = LinearStats()
-        self.spf = max(1, math.ceil(quality.linear_rate / scene.fps - 1e-9))  # steps per frame
+        want = max(1, math.ceil(quality.linear_rate / scene.fps - 1e-9))
+        self.spf = min(d for d in range(1, pymunk_substeps + 1)
+                       if pymunk_substeps % d == 0 and (d >= want or d == pymunk_substeps))
+        self.ratio = pymunk_substeps // self.spf  # pymunk substeps per linear step
         self.h = 1.0 / (scene.fps * self.spf)
+        frames = scene.frame_count
+        self.tree_bones = [Bones.of([t]) for t in self.trees]
+        self.angles = [np.zeros((frames, 2 * b.n)) for b in self.tree_bones]
+        self.last_frame = np.full(len(self.trees), frames - 1)  # last frame each tree spent here
+        self.members = list(range(len(self.trees)))
+        self.t = 0.0
+        self.step = 0
+        self._build(np.zeros(0), np.zeros(0))
+
+    # ------------------------------------------------------------------
+    # the system of the member trees
+
+    def _build(self, q: np.ndarray, v: np.ndarray) -> None:
+        """(Re)build the joint-space system of the member trees; `q`, `v`
+        their state in the new numbering (empty: at rest)."""
         t0 = time.perf_counter()
-        self.bones = Bones.of(self.trees)
-        layout = ChainLayout.of(self.trees, self.bones.offsets, self.bones.pivot0,
-                                self.bones.tip0)
-        hold = None if scene.prestress else np.zeros(2 * self.bones.n)
-        self.model = JointSpace(self.bones, layout, loads.g, GAMMA * self.h,
-                                BETA * self.h * self.h, hold)
-        self.stats.build_seconds = time.perf_counter() - t0
-        self.stats.dofs = self.model.n
+        trees = [self.trees[i] for i in self.members]
+        self.bones = b = Bones.of(trees)
+        if not trees:
+            self.model = None
+            return
+        layout = ChainLayout.of(trees, b.offsets, b.pivot0, b.tip0)
+        hold = None if self.scene.prestress else np.zeros(2 * b.n)
+        self.model = JointSpace(b, layout, self.loads.g, GAMMA * self.h, BETA * self.h * self.h,
+                                hold)
+        n = self.model.n
+        self.q = q if len(q) else np.zeros(n)
+        self.v = v if len(v) else np.zeros(n)
+        self.a = self.model.mass_factor.solve(self.rhs(self.t, self.q, self.v))
+        self.cone = np.repeat(b.cone, 2)
+        self.tip_rest = b.tip0[:, 2]
+        self.stats.build_seconds += time.perf_counter() - t0
+        self.stats.dofs = max(self.stats.dofs, n)
 
     def locate(self, bone: int) -> tuple[str, int]:
-        return locate(self.trees, self.bones.offsets, self.bones.bone_tree, bone)
+        return locate([self.trees[i] for i in self.members], self.bones.offsets,
+                      self.bones.bone_tree, bone)
 
-    def rhs(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """The equations' right-hand side at time t and state (q, v)."""
+    def rhs(self, t: float, q: np.ndarray, v: np.ndarray, dt: float | None = None):
+        """The equations' right-hand side at time t and state (q, v), loads
+        at the state's pose (blasts averaged over the next `dt` s)."""
         model, b = self.model, self.bones
         kin = model.kinematics(q, v)
         pose = model.pose(kin, q)
         force = self.loads.forces(t, pose.com, pose.vcom, pose.axis, b.props,
-                                  include_gravity=False, dt=self.h)
+                                  include_gravity=False, dt=self.h if dt is None else dt)
         pulls = b.pull_forces(t)
         if pulls is not None:
             force += pulls
@@ -80,40 +139,116 @@ class LinearSolver:
         force += b.mass[:, None] * self.loads.g
         return model.rhs(force, kin, pose, q)
 
-    def run(self, progress=None) -> list[TreeMotion]:
-        scene, model = self.scene, self.model
-        frames = scene.frame_count
-        n, h = model.n, self.h
-        q = np.zeros(n)
-        v = np.zeros(n)
-        a = model.mass_factor.solve(self.rhs(0.0, q, v))
-        qs = np.zeros((frames, n))
-        step = 0
-        for f in range(1, frames):
-            t_frame = time.perf_counter()
-            for _ in range(self.spf):
-                t0 = time.perf_counter()
-                q_pred = q + h * v + (0.5 - BETA) * h * h * a
-                v_pred = v + (1 - GAMMA) * h * a
-                step += 1
-                rhs = self.rhs(step * h, q_pred, v_pred)
-                t1 = time.perf_counter()
-                a = model.factor.solve(rhs)
-                q = q_pred + BETA * h * h * a
-                v = v_pred + GAMMA * h * a
-                self.stats.update_seconds += t1 - t0
-                self.stats.step_seconds += time.perf_counter() - t1
-            qs[f] = q
-            self.stats.frame_seconds.append(time.perf_counter() - t_frame)
-            if progress is not None:
-                progress(f, frames - 1)
-        self.stats.steps = step
-        rot, piv = pose_frames(self.bones, qs)
-        quats = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(frames, -1, 4)
+    # ------------------------------------------------------------------
+    # running
+
+    def advance_frame(self, f: int) -> list[HandOff]:
+        """Step to frame f, record it; the trees that left the tier meanwhile."""
+        t_frame = time.perf_counter()
+        out: list[HandOff] = []
+        while self.step < f * self.spf and self.model is not None:
+            self._step()
+            self.step += 1
+            self.t = self.step * self.h
+            out += self._leaving()
+        self._record(f)
+        self.stats.frame_seconds.append(time.perf_counter() - t_frame)
+        return out
+
+    def _step(self) -> None:
+        model = self.model
+        t0 = time.perf_counter()
+        blast = self.loads.blast_near(self.t, self.h)
+        parts = BLAST_SPLIT if blast else 1
+        h = self.h / parts
+        if parts > 1:
+            self.stats.split += 1
+        for k in range(parts):
+            q, v, a = self.q, self.v, self.a
+            q_pred = q + h * v + (0.5 - BETA) * h * h * a
+            v_pred = v + (1 - GAMMA) * h * a
+            rhs = self.rhs(self.t + (k + 1) * h, q_pred, v_pred, h)
+            t1 = time.perf_counter()
+            factor = model.factor if parts == 1 else model.factor_for(GAMMA * h, BETA * h * h)
+            self.a = factor.solve(rhs)
+            self.q = q_pred + BETA * h * h * self.a
+            self.v = v_pred + GAMMA * h * self.a
+            self.stats.update_seconds += t1 - t0
+            self.stats.step_seconds += time.perf_counter() - t1
+            t0 = time.perf_counter()
+        if not np.all(np.isfinite(self.q)):
+            tree, seg = self.locate(0)
+            raise SimulationError("non-finite state in the linear tier", tree, seg, self.t)
+        self.stats.steps += 1
+
+    def _leaving(self) -> list[HandOff]:
+        """Trees that left the linear range this step, handed over."""
+        model, b, q = self.model, self.bones, self.q
+        kin = model.kinematics(q, self.v)
+        bad = np.zeros(b.n, dtype=bool)
+        why = np.full(b.n, "", dtype=object)
+        turn = np.linalg.norm(kin[:, 0:3], axis=1)
+        hinge = (np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1)
+        near_break = model.bending_moment(q) > BREAK_MARGIN * b.strength
+        pose = model.pose(kin, q)
+        tip = pose.pivot + np.einsum("bij,bj->bi", pose.rot, b.tip0 - b.pivot0)
+        ground = (self.scene.ground & (tip[:, 2] < b.radius + CONTACT_MARGIN)
+                  & (tip[:, 2] < self.tip_rest - 1e-3))
+        for mask, reason in ((turn > MAX_TURN, f"a bone turned past {MAX_TURN} rad"),
+                             (hinge, f"a hinge past {CONE_FRACTION:.0%} of its cone"),
+                             (near_break, f"a joint past {BREAK_MARGIN:.0%} of its strength"),
+                             (ground, "a tip reached the ground")):
+            why[mask & (why == "")] = reason
+            bad |= mask
+        leaving = {}
+        for ti_local, i in enumerate(self.members):
+            lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
+            tree = self.trees[i]
+            hit = np.nonzero(bad[lo:hi])[0]
+            if len(hit):
+                name, seg = self.locate(int(lo + hit[0]))
+                path = tree.rig.model.segment_paths()[seg]
+                leaving[ti_local] = f"{path}: {why[lo + hit[0]]}"
+            elif tree.cut is not None and self.t + 0.5 * self.h >= tree.cut.time:
+                leaving[ti_local] = "its felling cut"
+        if not leaving:
+            return []
         out = []
-        for ti in range(len(self.trees)):
-            lo, hi = self.bones.offsets[ti], self.bones.offsets[ti + 1]
-            out.append(TreeMotion(quats[:, lo:hi], piv[:, lo:hi], []))
+        rot_exact, _ = pose_frames(b, q[None])
+        for ti_local, reason in leaving.items():
+            lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
+            i = self.members[ti_local]
+            self.last_frame[i] = math.ceil(self.step / self.spf) - 1
+            out.append(HandOff(i, self.step * self.ratio, rot_exact[0, lo:hi].copy(),
+                               kin[lo:hi, 6:9].copy(), reason))
+        keep = [k for k in range(len(self.members)) if k not in leaving]
+        dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
+            if keep else np.zeros(0, dtype=np.int64)
+        q, v = self.q[dof], self.v[dof]
+        self.members = [self.members[k] for k in keep]
+        self.stats.rebuilds += 1
+        self._build(q, v)
+        return out
+
+    def _record(self, f: int) -> None:
+        b = self.bones
+        for k, i in enumerate(self.members):
+            self.angles[i][f] = self.q[2 * b.offsets[k]:2 * b.offsets[k + 1]]
+
+    def motions(self) -> list[TreeMotion]:
+        """Per tree, the motion of the frames it spent in this tier (others zero)."""
+        out = []
+        frames = self.scene.frame_count
+        for i, bones in enumerate(self.tree_bones):
+            last = int(self.last_frame[i]) + 1
+            quats = np.zeros((frames, bones.n, 4))
+            pivots = np.zeros((frames, bones.n, 3))
+            if last > 0:
+                rot, piv = pose_frames(bones, self.angles[i][:last])
+                quats[:last] = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(
+                    last, bones.n, 4)
+                pivots[:last] = piv
+            out.append(TreeMotion(quats, pivots, []))
         return out
 
 

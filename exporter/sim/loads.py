@@ -95,6 +95,16 @@ class SceneLoads:
             force += props.mass[:, None] * a.acceleration(com, t)
         return force
 
+    def blast_near(self, t: float, dt: float) -> bool:
+        """Whether a blast's pulse may load something within [t, t + dt]: from
+        its detonation until its front has run past MIN_PRESSURE (at the
+        speed of sound) and its positive phase is over."""
+        for e in self.explosions:
+            end = e.time + e.reach(MIN_PRESSURE) / 300.0 + 0.05
+            if t + dt >= e.time and t <= end:
+                return True
+        return False
+
     def quiet_after(self, centre: np.ndarray, radius: float, height: float) -> float:
         """Time (s) after which no time-varying load reaches a tree whose
         crown fits in a vertical cylinder (centre xy, radius, height): 0 if

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..rotations import cross
+from ..model import TreeModel
 from ..scene import Scene
 
 
@@ -168,3 +169,22 @@ class Projectiles:
                 dv = min(speed, self.mu[i] * 9.81 * dt)
                 self.vel[i, :2] = vh - vh / speed * dv
             self.spin[i] *= 0.8
+
+
+def projectile_reaches(scene: Scene, model: TreeModel) -> bool:
+    """Whether a projectile's ballistic path passes near the tree."""
+    lo, hi = model.bounds()
+    centre = 0.5 * (lo + hi)
+    radius = 0.5 * float(np.linalg.norm(hi[:2] - lo[:2])) + 1.0
+    g = scene.gravity
+    for p in scene.projectiles:
+        pos = np.array(p.position, dtype=float)
+        vel = np.array(p.velocity, dtype=float)
+        for _ in range(2000):  # ballistic path until it lands, 10 ms steps
+            if np.linalg.norm(pos[:2] - centre[:2]) < radius + p.size and pos[2] < hi[2] + p.size:
+                return True
+            vel[2] -= g * 0.01
+            pos += vel * 0.01
+            if pos[2] < -1:
+                break
+    return False

@@ -30,6 +30,7 @@ class Quality:
     joint_correction: float = 0.02
     coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
     linear_rate: float = 48.0  # Hz, the linear tier's implicit steps
+    tier: str = "auto"  # "auto": linear, pymunk when nonlinear; "pymunk": pymunk only
 
 
 QUALITIES = {

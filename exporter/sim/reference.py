@@ -134,6 +134,8 @@ from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
 from .loads import SceneLoads
+from .projectiles import projectile_reaches
+from .solver import SolveResult, frame_timing
 
 DEFAULT_TIMESTEP = 1 / 2000  # s
 DEFAULT_FORCE_RATE = 500.0  # Hz
@@ -298,8 +300,6 @@ class ReferenceSolver:
         projectiles = bool(scene.projectiles)
         shared: list[int] = []
         if projectiles:
-            from ..pipeline import projectile_reaches
-
             shared = [ti for ti, t in enumerate(self.trees)
                       if projectile_reaches(scene, t.rig.model)]
         self.groups: list[_Group] = []
@@ -766,7 +766,7 @@ class ReferenceSolver:
     # ------------------------------------------------------------------
     # running
 
-    def run(self, progress=None) -> list[TreeMotion]:
+    def run(self, progress=None) -> SolveResult:
         """Simulate the scene; per active tree, the bones' motion at every frame.
 
         Each step: mj_step1 (kinematics), then, at force updates, read the
@@ -837,12 +837,21 @@ class ReferenceSolver:
             self.timing["step_seconds"] += (t1 - t0) + (t3 - t2)
             self.step_times.append(t3 - t0)
             self.stats.steps += 1
-        out = []
+        motions = {}
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
-            out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
-        return out
+            motions[tree.name] = TreeMotion(quats[:, a:b], pivots[:, a:b], events)
+        meta = self.meta()
+        notes = meta.pop("notes")
+        timing = {k: round(v, 3) for k, v in self.timing.items()}
+        steps = np.asarray(self.step_times)
+        if len(steps):
+            per_frame = steps[: len(steps) // self.spf * self.spf].reshape(-1, self.spf).sum(1)
+            timing.update(segment_steps=sum(t.rig.model.n_segments for t in self.trees)
+                          * len(steps), **frame_timing(per_frame, self.spf))
+        return SolveResult(motions, self.objects(), meta, notes,
+                           {t.name: "reference" for t in self.trees}, timing)
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray) -> None:
         for g in self.groups:

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymunk import batch
 
-from ...rotations import quaternions_from_matrices
+from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
 from ..common import SimTree, TreeMotion, locate
 from ..debris import Debris
@@ -86,6 +86,16 @@ class Stats:
     frame_seconds: list[float] = field(default_factory=list)  # physics time of each frame
 
 
+@dataclass
+class StartState:
+    """A pose handed over by the linear tier, per bone of the tier's trees:
+    rotation relative to rest (B, 3, 3) and world angular velocity (B, 3),
+    rad/s."""
+
+    rot: np.ndarray
+    omega: np.ndarray
+
+
 class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
     """Simulate the active trees of one scene with the pymunk tier."""
 
@@ -117,12 +127,23 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         return self.trees[ti].rig.model.segment_paths()[self.locate(bone)[1]]
 
     def run(self, progress=None) -> list[TreeMotion]:
-        """Simulate the scene; per tree, the bones' motion at every frame."""
-        scene = self.scene
+        """Simulate the scene from rest; per tree, the bones' motion at every frame."""
+        self.begin()
+        frames = self.scene.frame_count
+        for f in range(1, frames):
+            self.advance_frame(f)
+            if progress is not None:
+                progress(f, frames - 1)
+        return self.motions()
+
+    def begin(self, substep: int = 0, start: StartState | None = None) -> None:
+        """Set up a run from substep `substep` (time substep x h), from rest
+        or, with `start`, from a pose and spin handed over by the linear tier;
+        the frame it starts in (or at) is recorded."""
+        scene, n = self.scene, self.n
         frames = scene.frame_count
-        n = self.n
-        quats = np.zeros((frames, n, 4))
-        pivots = np.zeros((frames, n, 3))
+        self.quats = np.zeros((frames, n, 4))
+        self.pivots = np.zeros((frames, n, 3))
         self.events: list[Event] = []
         self.cut_state: dict[int, str] = {}
         self.joint_alive = np.ones(n, dtype=bool)
@@ -134,79 +155,124 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
                              self.radius, scene.ground)
         self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
-        writes = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
+        if start is not None:
+            self._hand_over(start)
         self.read()
-        pose = self.reconstruct()
-        prev = None
-        quats[0] = quaternions_from_matrices(pose["rot"])
-        pivots[0] = pose["pivot"]
-        substep, t, fresh = 0, 0.0, True
-        next_update, last_update = 0, 0
+        self.pose = self.reconstruct()
+        self.prev = None
+        self.substep = substep
+        self.fresh = True
+        self.next_update = self.last_update = substep
         self.contact_active = False
         self.refine = 1
-        for f in range(1, frames):
-            t_frame = time.perf_counter()
-            for _ in range(self.spf):
-                if substep >= next_update:
-                    t0 = time.perf_counter()
-                    if not fresh:
-                        self.read()
-                        self.check(t)
-                        prev, pose = pose, self.reconstruct()
-                    fresh = False
-                    if self.cut_list:
-                        self.handle_cuts(t)
-                    if self.breakable.any():
-                        before = len(self.events)
-                        self.check_breaks(t, pose)
-                        if len(self.events) > before:
-                            self.log(f"t = {t:.3f} s: {len(self.events) - before} joints broke")
-                            pose = self.reconstruct()
-                    # contact needs a stiff spring, and only an update every
-                    # substep affords one: while anything touches the
-                    # ground, update at the substep rate
-                    ahead = 1 if self.contact_active else self.update_every
-                    self.forces(t, pose, prev, max(substep - last_update, 1) * self.h,
-                                ahead * self.h)
-                    last_update, next_update = substep, substep + ahead
-                    self.stats.updates += 1
-                    self.stats.update_seconds += time.perf_counter() - t0
+        first = substep // self.spf
+        self.first_frame = first
+        self.substep_start = substep
+        self.quats[first] = quaternions_from_matrices(self.pose["rot"])
+        self.pivots[first] = self.pose["pivot"]
+
+    def advance_frame(self, f: int) -> None:
+        """Step to frame f and record it."""
+        writes = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
+        t_frame = time.perf_counter()
+        t = self.substep * self.h
+        while self.substep < f * self.spf:
+            if self.substep >= self.next_update:
                 t0 = time.perf_counter()
-                batch.set_space_bodies(self.space, writes, self.write_buf)
-                if self.refine > 1:
-                    for _ in range(self.refine):  # forces persist? set them every step
-                        self.space.step(self.h / self.refine)
-                        batch.set_space_bodies(self.space, writes, self.write_buf)
-                    self.stats.refined += 1
-                else:
-                    self.space.step(self.h)
-                self.stats.step_seconds += time.perf_counter() - t0
-                substep += 1
-                t = substep * self.h
+                if not self.fresh:
+                    self.read()
+                    self.check(t)
+                    self.prev, self.pose = self.pose, self.reconstruct()
+                self.fresh = False
+                if self.cut_list:
+                    self.handle_cuts(t)
+                if self.breakable.any():
+                    before = len(self.events)
+                    self.check_breaks(t, self.pose)
+                    if len(self.events) > before:
+                        self.log(f"t = {t:.3f} s: {len(self.events) - before} joints broke")
+                        self.pose = self.reconstruct()
+                # contact needs a stiff spring, and only an update every
+                # substep affords one: while anything touches the ground,
+                # update at the substep rate
+                ahead = 1 if self.contact_active else self.update_every
+                self.forces(t, self.pose, self.prev,
+                            max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
+                self.last_update, self.next_update = self.substep, self.substep + ahead
+                self.stats.updates += 1
+                self.stats.update_seconds += time.perf_counter() - t0
             t0 = time.perf_counter()
-            self.read()
-            self.check(t)
-            self.stats.max_joint_gap = max(self.stats.max_joint_gap, self.joint_gap())
-            pose_frame = self.reconstruct()
-            if substep >= next_update:  # the frame's pose is the next update's
-                prev, pose, fresh = pose, pose_frame, True
-            quats[f] = quaternions_from_matrices(pose_frame["rot"])
-            pivots[f] = pose_frame["pivot"]
-            if self.projectiles is not None:
-                self.projectiles.record(f)
-            self.settle(t, pose_frame, 1.0 / scene.fps)
-            self.stats.update_seconds += time.perf_counter() - t0
-            self.stats.frame_seconds.append(time.perf_counter() - t_frame)
-            if progress is not None:
-                progress(f, frames - 1)
-        self.stats.substeps = substep
+            batch.set_space_bodies(self.space, writes, self.write_buf)
+            if self.refine > 1:
+                for _ in range(self.refine):  # forces are cleared after a step: set them again
+                    self.space.step(self.h / self.refine)
+                    batch.set_space_bodies(self.space, writes, self.write_buf)
+                self.stats.refined += 1
+            else:
+                self.space.step(self.h)
+            self.stats.step_seconds += time.perf_counter() - t0
+            self.substep += 1
+            self.stats.substeps += 1
+            t = self.substep * self.h
+        t0 = time.perf_counter()
+        self.read()
+        self.check(t)
+        self.stats.max_joint_gap = max(self.stats.max_joint_gap, self.joint_gap())
+        pose_frame = self.reconstruct()
+        if self.substep >= self.next_update:  # the frame's pose is the next update's
+            self.prev, self.pose, self.fresh = self.pose, pose_frame, True
+        self.quats[f] = quaternions_from_matrices(pose_frame["rot"])
+        self.pivots[f] = pose_frame["pivot"]
+        if self.projectiles is not None:
+            self.projectiles.record(f)
+        self.settle(t, pose_frame, 1.0 / self.scene.fps)
+        self.stats.update_seconds += time.perf_counter() - t0
+        self.stats.frame_seconds.append(time.perf_counter() - t_frame)
         self.stats.debris_clamped = self.debris.clamped
+
+    def motions(self) -> list[TreeMotion]:
+        """Per tree, the bones' motion at every frame recorded so far."""
         out = []
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
-            out.append(TreeMotion(quats[:, a:b], pivots[:, a:b], events))
+            out.append(TreeMotion(self.quats[:, a:b], self.pivots[:, a:b], events))
         return out
+
+    def _hand_over(self, start: StartState) -> None:
+        """Put every body where the handed-over pose has its bone: each
+        plane's angle is the bone's rotation relative to its chain's frame
+        projected on the plane's normal, and likewise its rate; pivots and
+        velocities follow down each 2D chain, so the pivots start joined.
+        (The planes hold no twist: what the linear tier's two hinges turned
+        about a bone's own axis, a second-order amount, is dropped.)"""
+        bb = self.body_bone
+        frame = self.bone_frame[bb]
+        has = frame >= 0
+        fr = np.where(has[:, None, None], start.rot[np.maximum(frame, 0)], np.eye(3))
+        w_frame = np.where(has[:, None], start.omega[np.maximum(frame, 0)], 0.0)
+        rel = np.matmul(np.transpose(fr, (0, 2, 1)), start.rot[bb])
+        angle = (rotvecs_from_matrices(rel) * self.body_n).sum(1)
+        rate = (np.einsum("bji,bj->bi", fr, start.omega[bb] - w_frame) * self.body_n).sum(1)
+        pos = self.q0.copy()
+        vel = np.zeros((len(bb), 2))
+        prev = self.prev_body
+        for i in range(len(bb)):  # bodies of a chain plane follow each other in order
+            j = prev[i]
+            if j >= 0:
+                arm = self.q0[i] - self.q0[j]
+                c, s = math.cos(angle[j]), math.sin(angle[j])
+                turned = np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
+                pos[i] = pos[j] + turned
+                vel[i] = vel[j] + rate[j] * np.array([-turned[1], turned[0]])
+        for i, body in enumerate(self.bodies):
+            arm = self.cog2d0[i] - self.q0[i]
+            c, s = math.cos(angle[i]), math.sin(angle[i])
+            turned = np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
+            body.angle = float(angle[i])
+            body.position = tuple(pos[i].tolist())
+            body.velocity = tuple((vel[i] + rate[i] * np.array([-turned[1], turned[0]])).tolist())
+            body.angular_velocity = float(rate[i])
 
     def _quiet_times(self) -> np.ndarray:
         """Per tree, the time (s) after which no changing load reaches it

@@ -1,0 +1,315 @@
+"""Running the planar LOD on many trees: in chunks, serially or in worker
+processes, with the same result either way.
+
+Within a chunk, every tree starts in the linear tier (linear.py) and moves
+to the pymunk tier (chains/) with its pose and spin when it leaves the
+linear range; trees a projectile can reach start in the pymunk tier, which
+owns the projectiles. `Quality.tier = "pymunk"` keeps every tree there.
+
+Trees do not interact in the planar LOD (projectiles aside), but a solver
+makes some decisions for all its trees at once (loads re-evaluated every
+substep while anything touches the ground; steps split while a blast acts),
+so a tree's motion depends on which trees share its solver. Chunks are
+therefore fixed by the scene alone — trees grouped by quality level, then
+split in scene order into chunks of about CHUNK_SEGMENTS segments — and a
+parallel run only changes which process simulates a chunk, never the
+chunks: bit-identical bakes with any number of workers. Scenes with
+projectiles (which can hit any tree) run as one chunk.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from ..scene import Scene
+from .quality import Quality
+from .common import SimTree, TreeMotion
+from .chains import PymunkTier, Stats
+from .chains.forces import MAX_REFINE
+from .common import cap_note
+from .debris import MAX_SPIN
+from .solver import SolveResult, frame_timing
+from .chains.tier import StartState
+from .events import TIER, Event
+from .linear import LinearStats, LinearTier
+from .loads import SceneLoads
+from .projectiles import projectile_reaches
+
+CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
+
+
+@dataclass
+class TierUse:
+    """Which tier simulated a tree: "linear", "pymunk" or "linear, then
+    pymunk" from `switch` s, and why."""
+
+    tier: str
+    switch: float | None = None
+    reason: str = ""
+
+
+@dataclass
+class ChunkResult:
+    motions: list[TreeMotion]
+    stats: Stats  # the pymunk tier's (all its instances in the chunk)
+    linear: LinearStats | None
+    tiers: list[TierUse]
+    h: float  # the pymunk tier's substep, s
+    dt_update: float  # its load interval, s
+    linear_step: float | None  # the linear tier's step, s
+    segments: int
+    segment_steps: int  # simulated segments x steps (each tier at its own step)
+    objects: tuple | None = None  # projectile tracks (shapes, sizes, positions, rotations)
+
+
+def chunks(trees: list[SimTree], qualities: list[Quality],
+           whole: bool) -> list[tuple[Quality, list[int]]]:
+    """Indices of active trees, grouped by quality, in chunks of about
+    CHUNK_SEGMENTS segments (or one chunk per quality when `whole`)."""
+    groups: dict[str, tuple[Quality, list[int]]] = {}
+    for i, (t, q) in enumerate(zip(trees, qualities)):
+        if t.active:
+            groups.setdefault(repr(q), (q, []))[1].append(i)
+    out = []
+    for q, members in groups.values():
+        current: list[int] = []
+        size = 0
+        for i in members:
+            n = trees[i].rig.model.n_segments
+            if current and not whole and size + n > CHUNK_SEGMENTS:
+                out.append((q, current))
+                current, size = [], 0
+            current.append(i)
+            size += n
+        if current:
+            out.append((q, current))
+    return out
+
+
+def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
+                    extent: np.ndarray, log=None, progress=None) -> ChunkResult:
+    loads = SceneLoads(scene, extent)
+    frames = scene.frame_count
+    substeps = max(1, round(quality.substep_rate / scene.fps))  # the pymunk tier's per frame
+    if quality.tier == "pymunk":
+        in_pymunk = [True] * len(trees)
+    else:
+        in_pymunk = [bool(scene.projectiles) and projectile_reaches(scene, t.rig.model)
+                     for t in trees]
+    lin_idx = [i for i, p in enumerate(in_pymunk) if not p]
+    lin = LinearTier([trees[i] for i in lin_idx], scene, quality, loads, substeps, log) \
+        if lin_idx else None
+    pym: list[tuple[PymunkTier, list[int]]] = []
+    first = [i for i, p in enumerate(in_pymunk) if p]
+    if first:
+        tier = PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
+        tier.begin()
+        pym.append((tier, first))
+    uses = [TierUse("pymunk" if p else "linear") for p in in_pymunk]
+    handed: list = []
+    for f in range(1, frames):
+        if lin is not None:
+            for ho in lin.advance_frame(f):
+                i = lin_idx[ho.tree]
+                tier = PymunkTier([trees[i]], scene, quality, loads, log=log)
+                tier.begin(ho.substep, StartState(ho.rot, ho.omega))
+                pym.append((tier, [i]))
+                t = ho.substep * tier.h
+                uses[i] = TierUse("linear, then pymunk", round(t, 6), ho.reason)
+                handed.append(Event(t, trees[i].name, TIER, "", f"to pymunk: {ho.reason}"))
+                log(f"t = {t:.3f} s: {trees[i].name} leaves the linear tier ({ho.reason})")
+        for tier, _ in pym:
+            tier.advance_frame(f)
+        if progress is not None:
+            progress(f, frames - 1)
+    # each tree's frames: the linear tier's until it left, the pymunk tier's after
+    motions: list[TreeMotion | None] = [None] * len(trees)
+    if lin is not None:
+        for k, m in enumerate(lin.motions()):
+            motions[lin_idx[k]] = m
+    for tier, members in pym:
+        for i, m in zip(members, tier.motions()):
+            if motions[i] is None:
+                motions[i] = m
+            else:
+                start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
+                motions[i].quaternions[start:] = m.quaternions[start:]
+                motions[i].pivots[start:] = m.pivots[start:]
+                motions[i].events.extend(m.events)
+    for e in handed:
+        i = next(k for k, t in enumerate(trees) if t.name == e.tree)
+        motions[i].events.insert(0, e)
+        motions[i].events.sort(key=lambda ev: ev.time)
+    stats = merge_stats([tier.stats for tier, _ in pym])
+    objects = None
+    for tier, _ in pym:
+        if tier.projectiles is not None:
+            p = tier.projectiles
+            objects = (p.shape, p.size, p.track_pos, p.track_quat)
+    h = 1.0 / (scene.fps * substeps)
+    pym_h = pym[0][0] if pym else None
+    steps = sum(sum(trees[i].rig.model.n_segments for i in members) * tier.stats.substeps
+                for tier, members in pym)
+    if lin is not None:
+        steps += sum(trees[i].rig.model.n_segments for i in lin_idx) * lin.stats.steps
+    return ChunkResult(motions, stats, lin.stats if lin is not None else None, uses, h,
+                       pym_h.dt_update if pym_h is not None else h,
+                       lin.h if lin is not None else None,
+                       sum(t.rig.model.n_segments for t in trees), steps, objects)
+
+
+def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, extent: np.ndarray,
+             workers: int = 1, log=None, progress=None) -> tuple[dict[str, TreeMotion],
+                                                                 list[ChunkResult]]:
+    """Motions of the active trees (by name) and each chunk's result."""
+    plan = chunks(trees, qualities, whole=bool(scene.projectiles))
+    results: list[ChunkResult | None] = [None] * len(plan)
+    workers = max(1, min(workers, len(plan)))
+    if workers == 1:
+        for k, (q, members) in enumerate(plan):
+            tick = _chunk_progress(progress, k, len(plan))
+            results[k] = _simulate_chunk([trees[i] for i in members], scene, q, extent, log,
+                                         tick)
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = [pool.submit(_simulate_chunk, [trees[i] for i in members], scene, q,
+                                   extent) for q, members in plan]
+            for k, fut in enumerate(futures):
+                results[k] = fut.result()
+                if progress is not None:
+                    progress(k + 1, len(plan))
+    motions = {}
+    for (_, members), res in zip(plan, results):
+        for i, motion in zip(members, res.motions):
+            motions[trees[i].name] = motion
+    return motions, results
+
+
+def _chunk_progress(progress, k: int, total: int):
+    if progress is None:
+        return None
+
+    def tick(done: int, frames: int) -> None:
+        progress(k * frames + done, total * frames)
+
+    return tick
+
+
+def merge_stats(stats: list[Stats]) -> Stats:
+    """One Stats for several pymunk tiers: counts add up, extremes take the worst."""
+    out = Stats()
+    worst = {"max_inertia_ratio", "max_joint_gap"}
+    for r in stats:
+        for f in fields(Stats):
+            a, b = getattr(out, f.name), getattr(r, f.name)
+            if f.name in worst:
+                setattr(out, f.name, max(a, b))
+            elif f.name == "first_limit":
+                if b is not None and (a is None or b[2] < a[2]):
+                    out.first_limit = b
+            elif f.name == "substeps":
+                out.substeps = max(a, b)
+            elif f.name == "notes":
+                out.notes = a + b
+            elif f.name == "frame_seconds":  # a tier started late covers the last frames
+                n = max(len(a), len(b))
+                out.frame_seconds = list(np.pad(a, (n - len(a), 0)) + np.pad(b, (n - len(b), 0)))
+            else:
+                setattr(out, f.name, a + b)
+    return out
+
+
+class PlanarLOD:
+    """The product's solver: the scene's active trees in chunks (fixed by the
+    scene), each chunk in its linear and pymunk tiers, in `workers`
+    processes; the same bake for any number of workers."""
+
+    def __init__(self, trees: list[SimTree], qualities: list[Quality], scene: Scene,
+                 extent: np.ndarray, workers: int = 1, log=None):
+        self.trees, self.qualities, self.scene = trees, qualities, scene
+        self.extent, self.workers = extent, workers
+        self.log = log or (lambda msg: None)
+
+    def run(self, progress=None) -> SolveResult:
+        scene = self.scene
+        motions, chunks = simulate(self.trees, self.qualities, scene, self.extent, self.workers,
+                                   self.log, progress)
+        st = merge_stats([c.stats for c in chunks])
+        lin = [c.linear for c in chunks if c.linear is not None]
+        quality = next(q for t, q in zip(self.trees, self.qualities) if t.active)
+        meta = {"substep": min(c.h for c in chunks),
+                "force_interval": min(c.dt_update for c in chunks), "chunks": len(chunks)}
+        steps = [c.linear_step for c in chunks if c.linear_step is not None]
+        if steps:
+            meta["linear_step"] = min(steps)
+        stats = {k: v for k, v in asdict(st).items()
+                 if k not in ("notes", "step_seconds", "update_seconds", "first_limit",
+                              "frame_seconds")}
+        stats["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
+        stats["linear_steps"] = sum(s.steps for s in lin)
+        stats["linear_rebuilds"] = sum(s.rebuilds for s in lin)
+        stats["linear_limited"] = sum(s.limited for s in lin)
+        stats["linear_split"] = sum(s.split for s in lin)
+        meta["stats"] = stats
+        tiers = {}
+        for (_, members), c in zip(chunks_plan(self.trees, self.qualities, scene), chunks):
+            for i, use in zip(members, c.tiers):
+                tiers[self.trees[i].name] = use.tier if use.switch is None else \
+                    f"{use.tier} at {use.switch:.3f} s ({use.reason})"
+        notes = lod_notes(st, lin, quality, meta["substep"])
+        step = sum(s.step_seconds for s in lin) + st.step_seconds
+        update = sum(s.update_seconds for s in lin) + st.update_seconds
+        frame_seconds = np.zeros(scene.frame_count - 1)
+        for s in [st, *lin]:
+            if len(s.frame_seconds):  # a pymunk tier started late covers the last frames
+                frame_seconds[len(frame_seconds) - len(s.frame_seconds):] += s.frame_seconds
+        substeps = round(1.0 / (scene.fps * meta["substep"]))
+        timing = {"step_seconds": round(step, 3), "update_seconds": round(update, 3),
+                  "build_seconds": round(sum(s.build_seconds for s in lin), 3),
+                  "segment_steps": sum(c.segment_steps for c in chunks),
+                  **frame_timing(frame_seconds, substeps)}
+        objects = None
+        for c in chunks:
+            if c.objects is not None:
+                from ..bake import ObjectsBake
+
+                objects = ObjectsBake(*c.objects)
+        return SolveResult(motions, objects, meta, notes, tiers, timing)
+
+
+def chunks_plan(trees: list[SimTree], qualities: list[Quality], scene: Scene):
+    return chunks(trees, qualities, whole=bool(scene.projectiles))
+
+
+def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: float) -> list[str]:
+    """What the planar LOD adapted or clamped, in words (never silently)."""
+    notes = []
+    if stats.inertia_floored:
+        notes.append(f"stability: rotary inertia raised on {stats.inertia_floored} of "
+                     f"{stats.bodies} pymunk bodies (up to {stats.max_inertia_ratio:.1f}x) to "
+                     f"keep omega*h <= {quality.stability:g} at h = {h * 1e3:.3f} ms")
+    limited = [s for s in [stats, *linear] if s.limited]
+    if limited:
+        first = min(limited, key=lambda s: s.first_limit[2])
+        merged = Stats(limited=sum(s.limited for s in limited), first_limit=first.first_limit)
+        notes.append(cap_note(merged))
+    split = sum(s.split for s in linear)
+    if split:
+        notes.append(f"{split} linear steps were split in 8 while a blast acted")
+    if stats.refined:
+        notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
+                     "blast, a hit, a capped load or a fast spin acted (pivots drift with the "
+                     "square of the step)")
+    if stats.broken:
+        notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")
+    if stats.debris_clamped:
+        notes.append(f"debris spin clamped at {MAX_SPIN:.0f} rad/s on {stats.debris_clamped} "
+                     "body substeps")
+    return notes
