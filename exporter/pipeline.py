@@ -20,6 +20,7 @@ from .rig import RigOptions, build_rig
 from .rotations import matrices_from_quaternions
 from .scene import Scene
 from .sim.quality import QUALITIES, Quality
+from .sim.audit import audit_motions, gain_notes
 from .sim.common import SimTree, TreeMotion
 from .sim.loads import SceneLoads
 from .sim.projectiles import projectile_reaches
@@ -200,7 +201,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         result = sim.run(progress)
         motions, objects, tiers = result.motions, result.objects, result.tiers
         meta.update(result.meta)
-        meta["notes"] = result.notes
+        meta["energy"] = audit_motions(motions, scene.fps)
+        meta["notes"] = result.notes + gain_notes(meta["energy"])
         timing.update(result.timing)
     for note in meta.get("notes", []):
         log(note)

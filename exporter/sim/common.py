@@ -92,6 +92,8 @@ class TreeMotion:
     quaternions: np.ndarray
     pivots: np.ndarray
     events: list = field(default_factory=list)  # events.Event records
+    energy: np.ndarray | None = None  # (F,) J, the audit's mechanical energy (audit.py)
+    work: np.ndarray | None = None  # (F,) J, external work done on the tree up to each frame
 
 
 @dataclass

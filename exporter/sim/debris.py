@@ -25,10 +25,12 @@ MAX_SPIN = 100.0  # rad/s: debris spin is clamped here (counted in `clamped`)
 class Debris:
     """Rigid debris bodies made of bones of a solver's global bone arrays."""
 
-    def __init__(self, mass, inertia, com0, pivot0, tip0, radius, ground: bool):
+    def __init__(self, mass, inertia, com0, pivot0, tip0, radius, ground: bool,
+                 g: np.ndarray | None = None):
         self.mass, self.inertia = mass, inertia
         self.com0, self.pivot0, self.tip0, self.radius = com0, pivot0, tip0, radius
         self.ground = ground
+        self.g = np.array([0.0, 0.0, -9.81]) if g is None else g  # m/s^2
         self.bones = np.zeros(0, dtype=np.int64)  # bones in debris, in body order
         self.owner = np.zeros(0, dtype=np.int64)  # debris body of each of those bones
         self.rot0 = np.zeros((0, 3, 3))  # bone rotation (rel. rest) at the break
@@ -43,6 +45,7 @@ class Debris:
         self.rest_time = np.zeros(0)  # s spent slow on the ground
         self.asleep = np.zeros(0, dtype=bool)
         self.clamped = 0  # body substeps whose spin was clamped to MAX_SPIN
+        self.work = np.zeros(len(mass))  # J per bone: work of the loads other than gravity
 
     @property
     def count(self) -> int:
@@ -138,7 +141,11 @@ class Debris:
             com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
             axis = apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
             axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
-            f, tq = self.loads(loads(com, vcom, axis), com)
+            bone_force = loads(com, vcom, axis)
+            gravity = self.mass[self.bones, None] * self.g
+            # held over the substep: work = force x the COM's displacement (v h)
+            self.work[self.bones] += ((bone_force - gravity) * vcom).sum(1) * h
+            f, tq = self.loads(bone_force, com)
             touching = np.zeros(self.count, dtype=bool)
             if self.ground:
                 cf, ct, touching = self._contact(h)

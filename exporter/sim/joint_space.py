@@ -227,6 +227,11 @@ class JointSpace:
         sub = self.sums.chain_suffix(per_bone)[self.dof_bone]
         return (self.axis * sub[:, 0:3]).sum(1) - (self.cross_pivot * sub[:, 3:6]).sum(1)
 
+    def spring_energy(self, q: np.ndarray) -> np.ndarray:
+        """Energy (B,) J the joint springs hold: (k q + hold)^2 / 2k per hinge."""
+        mom = self.k_spring * q + self.hold
+        return (0.5 * mom * mom / self.k_spring).reshape(-1, 2).sum(1)
+
     def bending_moment(self, q: np.ndarray) -> np.ndarray:
         """Magnitude (B,) N m of the spring moment at each bone's joint."""
         mom = (self.k_spring * q + self.hold).reshape(-1, 2)

@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import SimulationError
 from ..rotations import matrices_from_rotvec, quaternions_from_matrices
 from ..scene import Scene
+from .audit import Ledger, LoadWork, bone_energy, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
 from .joint_space import JointSpace
 from .layout import ChainLayout
@@ -91,9 +92,12 @@ class LinearTier:
         self.angles = [np.zeros((frames, 2 * b.n)) for b in self.tree_bones]
         self.last_frame = np.full(len(self.trees), frames - 1)  # last frame each tree spent here
         self.members = list(range(len(self.trees)))
+        self.ledger = Ledger(frames, len(self.trees))
+        self.load_work = LoadWork()
         self.t = 0.0
         self.step = 0
         self._build(np.zeros(0), np.zeros(0))
+        self._record(0)
 
     # ------------------------------------------------------------------
     # the system of the member trees
@@ -124,7 +128,8 @@ class LinearTier:
         return locate([self.trees[i] for i in self.members], self.bones.offsets,
                       self.bones.bone_tree, bone)
 
-    def rhs(self, t: float, q: np.ndarray, v: np.ndarray, dt: float | None = None):
+    def rhs(self, t: float, q: np.ndarray, v: np.ndarray, dt: float | None = None,
+            record: bool = False):
         """The equations' right-hand side at time t and state (q, v), loads
         at the state's pose (blasts averaged over the next `dt` s)."""
         model, b = self.model, self.bones
@@ -136,6 +141,8 @@ class LinearTier:
         if pulls is not None:
             force += pulls
         force = cap_loads(force, b.mass, t, self.stats, self.locate)
+        if record:
+            self.ledger.add_work(self._per_tree(self.load_work.update(force, pose.com)))
         force += b.mass[:, None] * self.loads.g
         return model.rhs(force, kin, pose, q)
 
@@ -167,7 +174,7 @@ class LinearTier:
             q, v, a = self.q, self.v, self.a
             q_pred = q + h * v + (0.5 - BETA) * h * h * a
             v_pred = v + (1 - GAMMA) * h * a
-            rhs = self.rhs(self.t + (k + 1) * h, q_pred, v_pred, h)
+            rhs = self.rhs(self.t + (k + 1) * h, q_pred, v_pred, h, record=True)
             t1 = time.perf_counter()
             factor = model.factor if parts == 1 else model.factor_for(GAMMA * h, BETA * h * h)
             self.a = factor.solve(rhs)
@@ -230,10 +237,27 @@ class LinearTier:
         self._build(q, v)
         return out
 
+    def _per_tree(self, per_bone: np.ndarray) -> np.ndarray:
+        """Per-bone values summed into the tier's tree numbering."""
+        out = np.zeros(len(self.trees))
+        out[self.members] = per_tree(per_bone, self.bones.bone_tree, len(self.members))
+        return out
+
     def _record(self, f: int) -> None:
         b = self.bones
         for k, i in enumerate(self.members):
             self.angles[i][f] = self.q[2 * b.offsets[k]:2 * b.offsets[k + 1]]
+        if self.model is None:
+            return
+        model = self.model
+        kin = model.kinematics(self.q, self.v)
+        pose = model.pose(kin, self.q)
+        e = bone_energy(b.mass, b.inertia, pose.rot, pose.com, pose.vcom, kin[:, 6:9],
+                        -self.loads.g[2])
+        e += model.spring_energy(self.q)
+        energy = np.full(len(self.trees), np.nan)
+        energy[self.members] = per_tree(e, b.bone_tree, len(self.members))
+        self.ledger.record(f, energy)
 
     def motions(self) -> list[TreeMotion]:
         """Per tree, the motion of the frames it spent in this tier (others zero)."""
@@ -248,7 +272,8 @@ class LinearTier:
                 quats[:last] = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(
                     last, bones.n, 4)
                 pivots[:last] = piv
-            out.append(TreeMotion(quats, pivots, []))
+            out.append(TreeMotion(quats, pivots, [], self.ledger.energy[:, i],
+                                  self.ledger.work[:, i]))
         return out
 
 

@@ -136,9 +136,13 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 motions[i] = m
             else:
                 start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
-                motions[i].quaternions[start:] = m.quaternions[start:]
-                motions[i].pivots[start:] = m.pivots[start:]
-                motions[i].events.extend(m.events)
+                mine = motions[i]
+                mine.quaternions[start:] = m.quaternions[start:]
+                mine.pivots[start:] = m.pivots[start:]
+                mine.events.extend(m.events)
+                # the audit goes on: the work done in the linear tier carries over
+                mine.energy[start:] = m.energy[start:]
+                mine.work[start:] = m.work[start:] + lin.ledger.running[lin_idx.index(i)]
     for e in handed:
         i = next(k for k, t in enumerate(trees) if t.name == e.tree)
         motions[i].events.insert(0, e)

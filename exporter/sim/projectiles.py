@@ -141,9 +141,12 @@ class Projectiles:
         st = np.linalg.norm(vt)
         jt = np.zeros(3) if st < 1e-9 else -vt / st * min(self.mu[i] * jn, reduced * st)
         impulse = jn * normal + jt  # on the projectile
+        before = 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
         v = v + impulse / self.mass[i]
         r = -normal * self.radius[i]
         self.spin[i] += cross(r, jt) / self.inertia[i]
+        after = 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
+        solver.add_work(bone, max(before - after, 0.0))  # the most the tree can have got
         solver.apply_impulse(bone, -impulse, point + normal * solver.radius[bone], pose)
         self.hits += 1
         return float(s[k]), v

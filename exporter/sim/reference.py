@@ -18,9 +18,11 @@ reach share one model with the projectiles):
 - A capsule per bone, `bone_ratio` x its length, centred on it. It collides
   with the ground and projectiles (never with other bones) only when the
   scene has a ground and something can fall (projectiles, a cut, breakable
-  joints); otherwise contacts are off. Bones whose capsule pokes into the
-  ground at rest do not touch it while their tree stands. Contacts have
-  rolling friction (ROLLING): soft ground stops rolling sticks and balls.
+  joints); otherwise contacts are off. A capsule that reaches into the
+  ground at rest never touches it (a stem's base, freed by felling or
+  uprooting, would start deep in it and be thrown out: the energy audit's
+  largest gain). Contacts have rolling friction (ROLLING): soft ground stops
+  rolling sticks and balls.
 - Gravity is MuJoCo's (the same vector as SceneLoads.g). Air, blasts,
   attractors and pulls (as the planar LOD's `pull_forces`) are world forces
   at the bones' COMs (`xfrc_applied`), evaluated at `force_rate` (500 Hz;
@@ -121,6 +123,7 @@ from ..errors import SimulationError
 from ..rotations import cross
 from ..scene import Scene
 from .quality import Quality
+from .audit import Ledger, LoadWork, bone_energy, per_tree
 from .common import (
     MAX_ANGULAR_SPEED,
     Bones,
@@ -379,7 +382,9 @@ class ReferenceSolver:
                           size=[max(float(self.radius[b]), 1e-4), 0, 0],
                           contype=1 if collide else 0, conaffinity=0, condim=6,
                           friction=[FRICTION, 0.005, ROLLING])
-            if g.ground and self.in_ground[b] and self.piece_root[b] < 0:
+            # a capsule in the ground at rest never touches it: freed (felled,
+            # uprooted) it would start deep in it and be thrown out
+            if g.ground and self.in_ground[b]:
                 spec.add_exclude(bodyname1="world", bodyname2=f"b{b}")
             bodies[b] = body
         if g.projectiles:
@@ -568,7 +573,10 @@ class ReferenceSolver:
         pulls = self.bones.pull_forces(t)
         if pulls is not None:
             force += pulls
-        return cap_loads(force, self.mass, t, self.stats, self.locate)
+        force = cap_loads(force, self.mass, t, self.stats, self.locate)
+        self.ledger.add_work(per_tree(self.load_work.update(force, self.com[:n]),
+                                      self.bone_tree, len(self.trees)))
+        return force
 
     def _damping(self, g: _Group) -> None:
         """Structural damping as generalized forces (qfrc_applied): each
@@ -778,6 +786,8 @@ class ReferenceSolver:
         quats = np.zeros((frames, n, 4))
         pivots = np.zeros((frames, n, 3))
         self.com, self.vcom, self.omega = (np.zeros((n + 1, 3)) for _ in range(3))
+        self.ledger = Ledger(frames, len(self.trees))
+        self.load_work = LoadWork()
         self.rot = np.zeros((n, 3, 3))
         proj = next((g for g in self.groups if g.projectiles), None)
         n_proj = len(scene.projectiles) if proj is not None else 0
@@ -823,6 +833,8 @@ class ReferenceSolver:
                 if not self.attached.all():
                     self._clamp_spin()
                 force = self._external(t)
+                if proj is not None:
+                    self._projectile_work(proj)
                 for g in self.groups:
                     g.data.xfrc_applied[g.body, :3] = force[g.bones]
                 self.stats.updates += 1
@@ -841,7 +853,8 @@ class ReferenceSolver:
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
-            motions[tree.name] = TreeMotion(quats[:, a:b], pivots[:, a:b], events)
+            motions[tree.name] = TreeMotion(quats[:, a:b], pivots[:, a:b], events,
+                                            self.ledger.energy[:, ti], self.ledger.work[:, ti])
         meta = self.meta()
         notes = meta.pop("notes")
         timing = {k: round(v, 3) for k, v in self.timing.items()}
@@ -854,11 +867,47 @@ class ReferenceSolver:
                            {t.name: "reference" for t in self.trees}, timing)
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray) -> None:
+        n = self.n
+        springs = np.zeros(n)
         for g in self.groups:
             q = g.data.xquat[g.body][:, [1, 2, 3, 0]]
             q *= np.where(q[:, 3:4] < 0, -1.0, 1.0)
             quats[f, g.bones] = q
             pivots[f, g.bones] = g.data.xpos[g.body]
+            has = g.hinge_qpos >= 0
+            angle = np.where(has, g.data.qpos[np.maximum(g.hinge_qpos, 0)], 0.0)
+            eps = np.where(has, angle - self.springref[g.bones], 0.0)
+            springs[g.bones] = 0.5 * (self.k[g.bones] * eps * eps).sum(1)
+        e = bone_energy(self.mass, self.inertia, self.rot, self.com[:n], self.vcom[:n],
+                        self.omega[:n], -self.loads.g[2]) + springs
+        self.ledger.record(f, per_tree(e, self.bone_tree, len(self.trees)))
+
+    def _projectile_work(self, g: _Group) -> None:
+        """Energy the projectiles lose while touching a tree: the most that
+        tree can have got from them (the audit's work)."""
+        m, d = g.model, g.data
+        energy = np.zeros(len(g.proj_body))
+        for i, (body, dof) in enumerate(zip(g.proj_body, g.proj_dof)):
+            v = d.qvel[dof:dof + 6]
+            inertia = m.body_inertia[body]
+            energy[i] = (0.5 * m.body_mass[body] * (v[:3] @ v[:3])
+                         + 0.5 * (inertia * v[3:] * v[3:]).sum()
+                         - m.body_mass[body] * (self.loads.g @ d.xpos[body]))
+        last = getattr(self, "_proj_energy", None)
+        self._proj_energy = energy
+        if last is None:
+            return
+        bone_of_body = {int(b): int(bone) for b, bone in zip(g.body, g.bones)}
+        work = np.zeros(len(self.trees))
+        for c in d.contact[:d.ncon]:
+            b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+            for pb, other in ((b1, b2), (b2, b1)):
+                hit = np.nonzero(g.proj_body == pb)[0]
+                if len(hit) and other in bone_of_body:
+                    i = int(hit[0])
+                    ti = int(self.bone_tree[bone_of_body[other]])
+                    work[ti] = max(work[ti], last[i] - energy[i])
+        self.ledger.add_work(np.maximum(work, 0.0))
 
     def _projectiles(self, g: _Group, t: float, launched: np.ndarray) -> None:
         """Hold projectiles still until their launch time, then throw them."""

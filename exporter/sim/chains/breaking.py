@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from ..audit import bone_energy
 from ..debris import SLEEP_TIME
 from ..events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
 from .build import LIMIT, PIVOT, SPRING
@@ -190,6 +191,14 @@ class ChainEvents:
             self._relump(int(a))
         self._refresh_cog()
 
+    def _kinetic(self, tree: int) -> float:
+        """Kinetic energy (J) of a tree's bones, from the bodies' state."""
+        pose = self.reconstruct()
+        lo, hi = self.offsets[tree], self.offsets[tree + 1]
+        e = bone_energy(self.mass[lo:hi], self.inertia[lo:hi], pose["rot"][lo:hi],
+                        pose["com"][lo:hi], pose["vcom"][lo:hi], pose["omega"][lo:hi], 0.0)
+        return float(e.sum())
+
     def handle_cuts(self, t: float) -> None:
         """Felling: at the cut the root joints lose spring and cone (the
         hinge holds) and the tree is nudged toward the felling direction;
@@ -202,6 +211,8 @@ class ChainEvents:
                      if self.chain_tree[ci] == ti and self.chain_parent[ci] < 0]
             state = self.cut_state.get(ti, "standing")
             if state == "standing" and t >= cut.time:
+                self.read()
+                before = self._kinetic(ti)
                 self._rigid_lumps(ti)
                 for b in roots:
                     # plane 0 contains the felling direction: the notch frees
@@ -211,6 +222,8 @@ class ChainEvents:
                     for k in range(self.planes_of_bone[b]):
                         self.breakable[self.body_of[(b, k)]] = False
                     self._nudge(b, FELL_NUDGE)
+                self.read()
+                self.add_tree_work(ti, self._kinetic(ti) - before)  # the feller's push
                 self.cut_state[ti] = "hinged"
                 self.events.append(Event(t, tree.name, CUT, self.bone_path(roots[0]),
                                          "the hinge holds"))

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ...rotations import apply, apply_transposed, cross
+from ..audit import per_tree
 from ..common import cap_loads
 from ..contact import effective_mass, ground_forces
 from ..loads import BoneProps
@@ -35,6 +36,10 @@ class ChainForces:
             force += pulls
         limited = self.stats.limited
         force = cap_loads(force, self.mass, t, self.stats, self.locate)
+        external = force - self.mass[:, None] * self.loads.g
+        external[self.in_debris] = 0.0  # debris counts its own (Debris.work)
+        self.ledger.add_work(per_tree(self.load_work.update(external, com), self.bone_tree,
+                                      len(self.trees)))
         hits = self.projectiles.hits if self.projectiles is not None else 0
         if self.projectiles is not None:  # impulses on hit bones, both ways
             self.projectiles.advance(t, dt, pose, self)
@@ -150,16 +155,21 @@ class ChainForces:
         loose = np.nonzero(~self.joint_alive)[0]
         ends = np.concatenate([tips, pose["pivot"][loose]])
         owner = np.concatenate([np.arange(self.n), loose])
-        low = ends[:, 2] < self.radius[owner] + CONTACT_MARGIN
-        near = (ends[:, 2] < self.radius[owner]) & ~self.in_debris[owner]
+        # a contact sphere never reaches below where its point sat at rest: a
+        # stem's base at z = 0 freed from its stump would otherwise start a
+        # radius deep in the ground and be thrown up by the penalty spring
+        radius = np.minimum(self.radius[owner], np.maximum(np.concatenate(
+            [self.tip0[:, 2], self.pivot0[loose, 2]]), 0.0))
+        low = ends[:, 2] < radius + CONTACT_MARGIN
+        near = (ends[:, 2] < radius) & ~self.in_debris[owner]
         self.contact_active = bool((low & ~self.in_debris[owner]).any())
         if not near.any():
             return None
-        ends, owner = ends[near], owner[near]
+        ends, owner, radius = ends[near], owner[near], radius[near]
         arm = ends - pose["cog"][owner]
         vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
-        f = ground_forces(ends, vel, self.radius[owner], m_eff, dt)
+        f = ground_forces(ends, vel, radius, m_eff, dt)
         return owner, ends, f
 
     def apply_impulse(self, bone: int, impulse: np.ndarray, point: np.ndarray,

@@ -80,13 +80,25 @@ class ChainKinematics:
             piv = head[:, None, :] + np.cumsum(step, axis=1) - step
             pivot[bones] = piv[valid]
             c = cog[bones] = pivot[bones] + apply(r, lv["cog_arm"])
-            v = apply(rp, vrel[bones])
             w = apply(rp, wrel[bones])
             if lv["any"]:
-                v[has] += vcog[pp] + cross(omega[pp], c[has] - cog[pp])
                 w[has] += omega[pp]
-            vcog[bones] = v
             omega[bones] = w
+            # velocities follow the chain as its pivots do: each row's head
+            # pivot from its own body, the rest by the turn rates of the bones
+            # before them (a body's own axial velocity would be averaged over
+            # two planes, wrong once one plane turns far: a felled stem)
+            hp = piv[:, 0]
+            hv = apply(rp[h], vrel[heads]) - cross(apply(rp[h], wrel[heads]), c[h] - hp)
+            fh = lv["p"][h]
+            held = fh >= 0
+            if held.any():
+                f = fh[held]
+                hv[held] += vcog[f] + cross(omega[f], hp[held] - cog[f])
+            turn = np.zeros(grid.shape + (3,))
+            turn[valid] = cross(w, step[valid])
+            vp = hv[:, None, :] + np.cumsum(turn, axis=1) - turn
+            vcog[bones] = vp[valid] + cross(w, c - pivot[bones])
         if self.debris.count:
             d = self.debris.bones
             rot[d], pivot[d], vcom_d, omega[d] = self.debris.bone_poses()

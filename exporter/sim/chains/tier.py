@@ -47,18 +47,20 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import pymunk
 from pymunk import batch
 
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
 from ..common import SimTree, TreeMotion, locate
+from ..audit import Ledger, LoadWork, bone_energy, per_tree
 from ..debris import Debris
 from ..events import Event
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
 from ..quality import Quality
 from .breaking import ChainEvents
-from .build import ChainBuild
+from .build import SPRING, ChainBuild
 from .forces import ChainForces
 from .kinematics import ChainKinematics
 
@@ -153,7 +155,9 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.still_time = np.zeros(len(self.trees))
         self.quiet = self._quiet_times()
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
-                             self.radius, scene.ground)
+                             self.radius, scene.ground, self.loads.g)
+        self.ledger = Ledger(frames, len(self.trees))
+        self.load_work = LoadWork()
         self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
         if start is not None:
             self._hand_over(start)
@@ -170,6 +174,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.substep_start = substep
         self.quats[first] = quaternions_from_matrices(self.pose["rot"])
         self.pivots[first] = self.pose["pivot"]
+        self._audit(first, self.pose)
 
     def advance_frame(self, f: int) -> None:
         """Step to frame f and record it."""
@@ -223,6 +228,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
             self.prev, self.pose, self.fresh = self.pose, pose_frame, True
         self.quats[f] = quaternions_from_matrices(pose_frame["rot"])
         self.pivots[f] = pose_frame["pivot"]
+        self._audit(f, pose_frame)
         if self.projectiles is not None:
             self.projectiles.record(f)
         self.settle(t, pose_frame, 1.0 / self.scene.fps)
@@ -230,13 +236,41 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.stats.frame_seconds.append(time.perf_counter() - t_frame)
         self.stats.debris_clamped = self.debris.clamped
 
+    def _audit(self, frame: int, pose: dict) -> None:
+        """Record each tree's energy (audit.py): its bones' (debris included)
+        kinetic and gravitational energy and its live springs'; the work of
+        the debris' loads joins the ledger here."""
+        e = bone_energy(self.mass, self.inertia, pose["rot"], pose["com"], pose["vcom"],
+                        pose["omega"], -self.loads.g[2])
+        springs = np.zeros(len(self.bodies))
+        for i, joint in enumerate(self.joints):
+            spring = joint[SPRING]
+            if spring is not None:
+                a = spring.a.angle if spring.a.body_type == pymunk.Body.DYNAMIC else 0.0
+                eps = a - spring.b.angle - spring.rest_angle
+                springs[i] = 0.5 * spring.stiffness * eps * eps
+        e += np.bincount(self.body_bone, springs, minlength=self.n)
+        self.ledger.add_work(per_tree(self.debris.work, self.bone_tree, len(self.trees)))
+        self.debris.work[:] = 0.0
+        self.ledger.record(frame, per_tree(e, self.bone_tree, len(self.trees)))
+
+    def add_work(self, bone: int, joules: float) -> None:
+        """Energy given to a bone's tree from outside (a projectile's hit)."""
+        self.add_tree_work(int(self.bone_tree[bone]), joules)
+
+    def add_tree_work(self, tree: int, joules: float) -> None:
+        w = np.zeros(len(self.trees))
+        w[tree] = joules
+        self.ledger.add_work(w)
+
     def motions(self) -> list[TreeMotion]:
         """Per tree, the bones' motion at every frame recorded so far."""
         out = []
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
-            out.append(TreeMotion(self.quats[:, a:b], self.pivots[:, a:b], events))
+            out.append(TreeMotion(self.quats[:, a:b], self.pivots[:, a:b], events,
+                                  self.ledger.energy[:, ti], self.ledger.work[:, ti]))
         return out
 
     def _hand_over(self, start: StartState) -> None:
