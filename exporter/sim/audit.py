@@ -117,7 +117,7 @@ def gain_notes(audit: dict) -> list[str]:
     for name, a in audit.items():
         if a["max_gain_fraction"] > GAIN_TOLERANCE:
             during = f" (events: {'; '.join(a['events'])})" if a["events"] else ""
-            notes.append(f"energy audit: tree {name!r} gained {a['max_gain_j']:.0f} J "
+            notes.append(f"warning: energy audit: tree {name!r} gained {a['max_gain_j']:.0f} J "
                          f"({a['max_gain_fraction']:.1%} of its energy and the work done on it) "
                          f"that no load supplied, between t = {a['from_s']:.2f} and "
                          f"{a['at_s']:.2f} s{during}")

@@ -140,7 +140,8 @@ class LinearTier:
         pulls = b.pull_forces(t)
         if pulls is not None:
             force += pulls
-        force = cap_loads(force, b.mass, t, self.stats, self.locate)
+        force = cap_loads(force, b.mass, t, self.stats, self.locate,
+                          self.h if dt is None else dt)
         if record:
             self.ledger.add_work(self._per_tree(self.load_work.update(force, pose.com)))
         force += b.mass[:, None] * self.loads.g

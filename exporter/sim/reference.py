@@ -573,7 +573,7 @@ class ReferenceSolver:
         pulls = self.bones.pull_forces(t)
         if pulls is not None:
             force += pulls
-        force = cap_loads(force, self.mass, t, self.stats, self.locate)
+        force = cap_loads(force, self.mass, t, self.stats, self.locate, self.dt_force)
         self.ledger.add_work(per_tree(self.load_work.update(force, self.com[:n]),
                                       self.bone_tree, len(self.trees)))
         return force

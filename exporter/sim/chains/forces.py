@@ -12,6 +12,7 @@ from ...rotations import apply, apply_transposed, cross
 from ..audit import per_tree
 from ..common import cap_loads
 from ..contact import effective_mass, ground_forces
+from ..debris import MAX_STEP
 from ..loads import BoneProps
 
 REFINE = 8  # pymunk steps per substep at least, while an impulsive load acts
@@ -35,7 +36,7 @@ class ChainForces:
         if pulls is not None:
             force += pulls
         limited = self.stats.limited
-        force = cap_loads(force, self.mass, t, self.stats, self.locate)
+        force = cap_loads(force, self.mass, t, self.stats, self.locate, dt)
         external = force - self.mass[:, None] * self.loads.g
         external[self.in_debris] = 0.0  # debris counts its own (Debris.work)
         self.ledger.add_work(per_tree(self.load_work.update(external, com), self.bone_tree,
@@ -116,7 +117,8 @@ class ChainForces:
         props = BoneProps(*(getattr(self.props, f)[d] for f in
                             ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
         force = self.loads.forces(t, com, vcom, axis, props)
-        return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])))
+        return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])),
+                         min(dt, MAX_STEP))
 
     def _add_contact(self, contact, pose: dict, ftot: np.ndarray, torque: np.ndarray) -> None:
         """Add ground contact forces to the touching bones and, through
