@@ -63,17 +63,23 @@ class Ledger:
 
 
 class LoadWork:
-    """Work of loads held over intervals: the force set at one update times
-    the displacement of its point until the next."""
+    """Work of loads between updates: a force held over the interval (a
+    solver that holds its loads, `trapezoid` False) times the displacement of
+    its point until the next update; or, for the implicit trapezoidal steps
+    whose loads act at the step ends, the mean of the two ends' forces."""
 
-    def __init__(self):
+    def __init__(self, trapezoid: bool = False):
+        self.trapezoid = trapezoid
         self.force = None
         self.point = None
 
     def update(self, force: np.ndarray, point: np.ndarray) -> np.ndarray:
-        """Per-bone work (J) of the previous held force, and hold the new one."""
-        work = np.zeros(len(point)) if self.force is None or len(self.force) != len(point) \
-            else (self.force * (point - self.point)).sum(1)
+        """Per-bone work (J) since the previous update, and hold the new force."""
+        if self.force is None or len(self.force) != len(point):
+            work = np.zeros(len(point))
+        else:
+            acting = 0.5 * (self.force + force) if self.trapezoid else self.force
+            work = (acting * (point - self.point)).sum(1)
         self.force, self.point = force.copy(), point.copy()
         return work
 

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from ..rig import Rig
+from ..rotations import cross
 from .loads import BoneProps
 
 MAX_ANGULAR_SPEED = 500.0  # rad/s: beyond this a bone is taken to be unstable
@@ -65,18 +66,28 @@ def cap_note(stats) -> str | None:
 
 
 def hinge_axes(axis: np.ndarray, toward: np.ndarray | None = None) -> np.ndarray:
-    """The two hinges of a bone's joint (swing without twist): unit axes
-    (2, 3) perpendicular to the bone's `axis` and to each other, the first
-    turning first. With `toward`, a positive turn of the first tips the bone
-    toward it (a felling hinge); otherwise the first is horizontal when it
-    can be. Both solvers' joints use these."""
-    for cand in ([toward] if toward is not None else []) + [np.array([0.0, 0.0, 1.0]),
-                                                             np.array([1.0, 0.0, 0.0])]:
-        e = np.cross(axis, cand)
-        if np.linalg.norm(e) > 0.1:
-            e1 = e / np.linalg.norm(e)
-            return np.stack([e1, np.cross(axis, e1)])
-    raise AssertionError("no perpendicular found")  # pragma: no cover
+    """The two hinges of each bone's joint (swing without twist): unit axes
+    (B, 2, 3) perpendicular to the bones' unit `axis` (B, 3) and to each
+    other, the first turning first. Where `toward` (B, 3) is given (a row of
+    NaN: not), a positive turn of the first tips the bone toward it (a
+    felling hinge); otherwise the first is horizontal when it can be (z x
+    axis, else x x axis). Both solvers' joints use these."""
+    axis = np.atleast_2d(axis)
+    out = np.empty((len(axis), 2, 3))
+    todo = np.ones(len(axis), dtype=bool)
+    cands = [] if toward is None else [np.atleast_2d(toward)]
+    cands += [np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]])]
+    for cand in cands:
+        e = cross(axis, np.broadcast_to(cand, axis.shape))
+        norm = np.linalg.norm(e, axis=1)
+        ok = todo & (norm > 0.1)  # NaN rows (no `toward`) fail this
+        e1 = e[ok] / norm[ok, None]
+        out[ok, 0] = e1
+        out[ok, 1] = cross(axis[ok], e1)
+        todo &= ~ok
+    if todo.any():
+        raise AssertionError("no perpendicular found")  # pragma: no cover
+    return out
 
 
 @dataclass
@@ -165,14 +176,13 @@ class Bones:
         length = np.linalg.norm(tip0 - pivot0, axis=1)
         axis0 = np.divide(tip0 - pivot0, length[:, None], out=np.tile([0.0, 0.0, 1.0], (n, 1)),
                           where=length[:, None] > 0)
-        hinges = np.empty((n, 2, 3))
+        toward = np.full((n, 3), np.nan)
         for ti, t in enumerate(trees):
-            toward = None
             if t.cut is not None:  # a felled tree's root joints tip it toward the cut direction
                 a = math.radians(t.cut.direction)
-                toward = np.array([math.cos(a), math.sin(a), 0.0])
-            for b in range(int(offsets[ti]), int(offsets[ti + 1])):
-                hinges[b] = hinge_axes(axis0[b], toward if parent[b] < 0 else None)
+                lo, hi = int(offsets[ti]), int(offsets[ti + 1])
+                toward[lo:hi][parent[lo:hi] < 0] = [math.cos(a), math.sin(a), 0.0]
+        hinges = hinge_axes(axis0, toward)
         return cls(offsets, pivot0, tip0, cat(lambda t: t.rig.com).reshape(n, 3), mass,
                    cat(lambda t: t.rig.inertia).reshape(n, 3, 3), cat(lambda t: t.rig.k),
                    cat(lambda t: t.rig.alpha), cat(lambda t: t.rig.cone),
@@ -183,6 +193,18 @@ class Bones:
     @property
     def n(self) -> int:
         return int(self.offsets[-1])
+
+    def tree(self, ti: int) -> Bones:
+        """The bones of one tree (numbered from 0)."""
+        lo, hi = int(self.offsets[ti]), int(self.offsets[ti + 1])
+        part = {f.name: getattr(self, f.name)[lo:hi] for f in fields(self)
+                if f.name not in ("offsets", "props", "pulls", "parent", "bone_tree")}
+        props = BoneProps(*(getattr(self.props, f.name)[lo:hi] for f in fields(BoneProps)))
+        pulls = [Pull(p.bone - lo, p.force, p.ramp, p.release) for p in self.pulls
+                 if lo <= p.bone < hi]
+        return Bones(offsets=np.array([0, hi - lo]), props=props, pulls=pulls,
+                     parent=np.where(self.parent[lo:hi] >= 0, self.parent[lo:hi] - lo, -1),
+                     bone_tree=np.zeros(hi - lo, dtype=np.int64), **part)
 
     def pull_forces(self, t: float) -> np.ndarray | None:
         """World force (N) of the pulls acting at time t on each bone: rising

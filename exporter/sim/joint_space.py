@@ -147,6 +147,22 @@ class JointSpace:
         self.lump = (l0, l1, np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3)
                      - l2 + li)
         self.axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
+        self.roots = np.nonzero(bones.parent < 0)[0]
+        self.parent_or_self = np.where(bones.parent >= 0, bones.parent, np.arange(nb))
+        # vectors turned by a bone's rotation (columns: COM arm, axis) and by
+        # its frame's (arm from the parent's pivot, the two hinges, and how
+        # the second hinge turns with the first)
+        self.rest_vecs = np.stack([bones.com0 - bones.pivot0, self.axis0], 2)
+        self.frame_vecs = np.stack([self.arm, bones.hinges[:, 0], bones.hinges[:, 1],
+                                    self.second_turn], 2)
+        c = bones.com0
+        zero = np.zeros(nb)
+        self.minus_skew_com = -np.stack([np.stack([zero, -c[:, 2], c[:, 1]], 1),
+                                         np.stack([c[:, 2], zero, -c[:, 0]], 1),
+                                         np.stack([-c[:, 1], c[:, 0], zero], 1)], 1)
+        fr = layout.bone_frame
+        self.frame_row = np.where(fr >= 0, fr, nb)  # the frame bone's row, nb: the world
+        self.sign6 = np.array([1.0, 1, 1, -1, -1, -1])
 
     def factor_for(self, c1: float, c2: float) -> TreeFactor:
         """The factored M + c1 C + c2 K (cached)."""
@@ -178,27 +194,27 @@ class JointSpace:
         """Prefix sums (B, 12) down the tree of sum q n, sum q n x p, sum v n,
         sum v n x p over each bone's hinges and all below it: its rotation
         vector, the terms its points move by, and their rates."""
-        nb = self.bones.n
-        qv = np.stack([q, v], 1).reshape(nb, 2, 2)  # (bone, hinge, q or v)
-        own = np.einsum("bhs,bhk->bsk", qv, self.per_hinge).reshape(nb, 12)
+        ph = self.per_hinge  # (B, 2, 6)
+        own = np.empty((self.bones.n, 12))
+        own[:, 0:6] = q[0::2, None] * ph[:, 0] + q[1::2, None] * ph[:, 1]
+        own[:, 6:12] = v[0::2, None] * ph[:, 0] + v[1::2, None] * ph[:, 1]
         return self.sums.prefix(own)
 
     def pose(self, kin: np.ndarray, q: np.ndarray) -> Pose:
         """Bones' pose: rotations exp(rotation vector), pivots by summing
         turned arms down the tree; COM velocities first order."""
-        b = self.bones
         rot = matrices_from_rotvec(kin[:, 0:3])
-        has = b.parent >= 0
-        frame = np.where(has[:, None, None], rot[np.maximum(b.parent, 0)], np.eye(3))
-        pivot = self.sums.prefix(np.einsum("bij,bj->bi", frame, self.arm))
-        com = pivot + np.einsum("bij,bj->bi", rot, b.com0 - b.pivot0)
-        c0 = b.com0
-        vcom = cross(kin[:, 6:9], c0) - kin[:, 9:12]
-        axis = np.einsum("bij,bj->bi", rot, self.axis0)
-        h = b.hinges
-        first = np.einsum("bij,bj->bi", frame, h[:, 0])
-        second = np.einsum("bij,bj->bi", frame, h[:, 1] + q[0::2, None] * self.second_turn)
-        return Pose(rot, pivot, com, vcom, axis, np.stack([first, second], 1).reshape(-1, 3))
+        frame = rot[self.parent_or_self]
+        frame[self.roots] = np.eye(3)
+        turned = np.matmul(frame, self.frame_vecs)  # arm, hinge 0, hinge 1, d(hinge 1)/dq_0
+        own = np.matmul(rot, self.rest_vecs)  # COM arm, axis
+        pivot = self.sums.prefix(turned[:, :, 0])
+        com = pivot + own[:, :, 0]
+        vcom = np.matmul(self.minus_skew_com, kin[:, 6:9, None])[:, :, 0] - kin[:, 9:12]
+        hinge = np.empty((len(rot), 2, 3))
+        hinge[:, 0] = turned[:, :, 1]
+        hinge[:, 1] = turned[:, :, 2] + q[0::2, None] * turned[:, :, 3]
+        return Pose(rot, pivot, com, vcom, own[:, :, 1], hinge.reshape(-1, 3))
 
     def rhs(self, force: np.ndarray, kin: np.ndarray, pose: Pose, q: np.ndarray) -> np.ndarray:
         """J(q)^T F - hold - C v - K_s q (N m per dof) for forces (B, 3) N at
@@ -206,9 +222,10 @@ class JointSpace:
         per_bone = np.empty((len(force), 6))
         per_bone[:, 0:3] = force
         per_bone[:, 3:6] = cross(pose.com, force)
-        sub = self.sums.suffix(per_bone)[self.dof_bone]
-        p = pose.pivot[self.dof_bone]
-        loads = (pose.hinge * (sub[:, 3:6] - cross(p, sub[:, 0:3]))).sum(1)
+        sub = self.sums.suffix(per_bone)
+        # about each bone's pivot: sum c x F - p x sum F, then on its two hinges
+        moment = (sub[:, 3:6] - cross(pose.pivot, sub[:, 0:3]))[self.dof_bone]
+        loads = np.einsum("ij,ij->i", pose.hinge, moment)
         return loads - self.hold - self.alpha * self.limb_momentum(kin) - self.k_spring * q
 
     def limb_momentum(self, kin: np.ndarray) -> np.ndarray:
@@ -217,15 +234,13 @@ class JointSpace:
         chains on it, rigidly) by the bone's turn rate relative to the limb's
         frame; their moments about each hinge add up along the limb."""
         l0, l1, l2 = self.lump
-        fr = self.layout.bone_frame
-        frame = np.where((fr >= 0)[:, None], kin[np.maximum(fr, 0)], 0.0)
-        w = kin[:, 6:9] - frame[:, 6:9]
-        lin = kin[:, 9:12] - frame[:, 9:12]
+        rel = kin[:, 6:12] - np.concatenate([kin[:, 6:12], np.zeros((1, 6))])[self.frame_row]
+        w, lin = rel[:, 0:3], rel[:, 3:6]
         per_bone = np.empty((len(w), 6))
-        per_bone[:, 0:3] = np.einsum("bij,bj->bi", l2, w) - cross(l1, lin)
+        per_bone[:, 0:3] = np.matmul(l2, w[:, :, None])[:, :, 0] - cross(l1, lin)
         per_bone[:, 3:6] = cross(w, l1) - l0[:, None] * lin
         sub = self.sums.chain_suffix(per_bone)[self.dof_bone]
-        return (self.axis * sub[:, 0:3]).sum(1) - (self.cross_pivot * sub[:, 3:6]).sum(1)
+        return np.einsum("ij,ij->i", self.per_hinge.reshape(-1, 6), sub * self.sign6)
 
     def spring_energy(self, q: np.ndarray) -> np.ndarray:
         """Energy (B,) J the joint springs hold: (k q + hold)^2 / 2k per hinge."""

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import matrices_from_rotvec, quaternions_from_matrices
+from ..rotations import apply, matrices_from_rotvec, quaternions_from_matrices
 from ..scene import Scene
 from .audit import Ledger, LoadWork, bone_energy, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
@@ -88,12 +88,13 @@ class LinearTier:
         self.ratio = pymunk_substeps // self.spf  # pymunk substeps per linear step
         self.h = 1.0 / (scene.fps * self.spf)
         frames = scene.frame_count
-        self.tree_bones = [Bones.of([t]) for t in self.trees]
+        every = Bones.of(self.trees)
+        self.tree_bones = [every.tree(i) for i in range(len(self.trees))]
         self.angles = [np.zeros((frames, 2 * b.n)) for b in self.tree_bones]
         self.last_frame = np.full(len(self.trees), frames - 1)  # last frame each tree spent here
         self.members = list(range(len(self.trees)))
         self.ledger = Ledger(frames, len(self.trees))
-        self.load_work = LoadWork()
+        self.load_work = LoadWork(trapezoid=True)
         self.t = 0.0
         self.step = 0
         self._build(np.zeros(0), np.zeros(0))
@@ -116,6 +117,7 @@ class LinearTier:
         self.model = JointSpace(b, layout, self.loads.g, GAMMA * self.h, BETA * self.h * self.h,
                                 hold)
         n = self.model.n
+        self._state = None
         self.q = q if len(q) else np.zeros(n)
         self.v = v if len(v) else np.zeros(n)
         self.a = self.model.mass_factor.solve(self.rhs(self.t, self.q, self.v))
@@ -135,13 +137,14 @@ class LinearTier:
         model, b = self.model, self.bones
         kin = model.kinematics(q, v)
         pose = model.pose(kin, q)
+        dt = self.h if dt is None else dt
+        # blasts: the impulse within this step, which ends at t
         force = self.loads.forces(t, pose.com, pose.vcom, pose.axis, b.props,
-                                  include_gravity=False, dt=self.h if dt is None else dt)
+                                  include_gravity=False, dt=dt, blast_start=t - dt)
         pulls = b.pull_forces(t)
         if pulls is not None:
             force += pulls
-        force = cap_loads(force, b.mass, t, self.stats, self.locate,
-                          self.h if dt is None else dt)
+        force = cap_loads(force, b.mass, t, self.stats, self.locate, dt)
         if record:
             self.ledger.add_work(self._per_tree(self.load_work.update(force, pose.com)))
         force += b.mass[:, None] * self.loads.g
@@ -188,18 +191,25 @@ class LinearTier:
             tree, seg = self.locate(0)
             raise SimulationError("non-finite state in the linear tier", tree, seg, self.t)
         self.stats.steps += 1
+        self._state = None  # the new state's kinematics, evaluated when asked
+
+    def state(self):
+        """Kinematics and pose of the current state (once per step)."""
+        if self._state is None:
+            kin = self.model.kinematics(self.q, self.v)
+            self._state = (kin, self.model.pose(kin, self.q))
+        return self._state
 
     def _leaving(self) -> list[HandOff]:
         """Trees that left the linear range this step, handed over."""
         model, b, q = self.model, self.bones, self.q
-        kin = model.kinematics(q, self.v)
+        kin, pose = self.state()
         bad = np.zeros(b.n, dtype=bool)
         why = np.full(b.n, "", dtype=object)
         turn = np.linalg.norm(kin[:, 0:3], axis=1)
         hinge = (np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1)
         near_break = model.bending_moment(q) > BREAK_MARGIN * b.strength
-        pose = model.pose(kin, q)
-        tip = pose.pivot + np.einsum("bij,bj->bi", pose.rot, b.tip0 - b.pivot0)
+        tip = pose.pivot + apply(pose.rot, b.tip0 - b.pivot0)
         ground = (self.scene.ground & (tip[:, 2] < b.radius + CONTACT_MARGIN)
                   & (tip[:, 2] < self.tip_rest - 1e-3))
         for mask, reason in ((turn > MAX_TURN, f"a bone turned past {MAX_TURN} rad"),
@@ -251,8 +261,7 @@ class LinearTier:
         if self.model is None:
             return
         model = self.model
-        kin = model.kinematics(self.q, self.v)
-        pose = model.pose(kin, self.q)
+        kin, pose = self.state()
         e = bone_energy(b.mass, b.inertia, pose.rot, pose.com, pose.vcom, kin[:, 6:9],
                         -self.loads.g[2])
         e += model.spring_energy(self.q)

@@ -69,23 +69,26 @@ class SceneLoads:
         return air
 
     def forces(self, t: float, com: np.ndarray, vel: np.ndarray, axis: np.ndarray,
-               props: BoneProps, include_gravity: bool = True, dt: float = 0.0) -> np.ndarray:
+               props: BoneProps, include_gravity: bool = True, dt: float = 0.0,
+               blast_start: float | None = None) -> np.ndarray:
         """World force (N) at each bone's centre of mass: gravity, drag
         against the air (still air included: it damps motion), blasts,
         attractors. A solver that holds the result for `dt` seconds gets the
-        blast force averaged over [t, t + dt]: a blast's positive phase lasts
-        milliseconds, and a sample held over the interval would miss it or
-        overstate its impulse."""
+        blast force averaged over [t, t + dt] (or [blast_start, blast_start
+        + dt]: the implicit tier's step that ends at t): a blast's positive
+        phase lasts milliseconds, and a sample held over the interval would
+        miss it or overstate its impulse."""
         air = self.air_velocity(com, t)
         force = _drag_per_bone(air, vel, axis, props)
         self.blast_active = False
         if include_gravity:
             force += props.mass[:, None] * self.g
+        t_blast = t if blast_start is None else blast_start
         for e in self.explosions:
-            if t + dt < e.time:
+            if t_blast + dt < e.time:
                 continue
             samples = BLAST_SAMPLES if dt > 0 else 1
-            for ts in t + dt * (np.arange(samples) + 0.5) / samples if dt > 0 else [t]:
+            for ts in t_blast + dt * (np.arange(samples) + 0.5) / samples if dt > 0 else [t]:
                 blast = e.force(com, ts, axis, props.wood_area, props.leaf_area,
                                 props.diameter, 1.2)
                 if blast.any():

@@ -5,8 +5,8 @@ The joint-space products of the linear tier are such sums: a bone's
 velocity adds up the turns of every joint below it (prefix), and a joint's
 torque adds up the forces of everything it carries (suffix). Walking the
 tree bone by bone takes as many steps as it is deep; here each chain level
-(trunks, branches, twigs, ...) is one padded cumulative sum along its
-chains.
+(trunks, branches, twigs, ...) is one cumulative sum over its chains laid
+end to end (contiguous in memory, no padding), corrected at chain starts.
 """
 
 from __future__ import annotations
@@ -23,43 +23,59 @@ class ChainSums:
     def __init__(self, chains: list[np.ndarray], chain_parent: np.ndarray,
                  chain_level: np.ndarray, n: int):
         self.n = n
-        self.levels = []
+        order, self.levels = [], []
         for lev in range(int(chain_level.max()) + 1 if len(chains) else 0):
             members = np.nonzero(chain_level == lev)[0]
-            length = max(len(chains[c]) for c in members)
-            grid = np.full((len(members), length), n, dtype=np.int64)  # n: scratch row
-            for i, c in enumerate(members):
-                grid[i, :len(chains[c])] = chains[c]
-            frame = np.where(chain_parent[members] >= 0, chain_parent[members], n)
-            self.levels.append((grid, frame))
+            start = len(order)
+            lengths = np.array([len(chains[c]) for c in members])
+            for c in members:
+                order.extend(int(b) for b in chains[c])
+            first = start + np.concatenate([[0], np.cumsum(lengths)[:-1]])  # chain starts
+            last = first + lengths - 1
+            row_chain = np.repeat(np.arange(len(members)), lengths)
+            self.levels.append((slice(start, len(order)), first - start, last - start,
+                                row_chain, chain_parent[members]))
+        self.order = np.asarray(order, dtype=np.int64)  # bones, level by level, chain by chain
+        self.position = np.empty(n, dtype=np.int64)
+        self.position[self.order] = np.arange(n)
+        for k, (rows, first, last, row_chain, parent) in enumerate(self.levels):
+            held = parent >= 0
+            self.levels[k] = (rows, first, last, row_chain, held,
+                              self.position[parent[held]] if held.any() else parent[held])
 
     def prefix(self, x: np.ndarray) -> np.ndarray:
         """(n, k): each bone's value plus those of every bone below it."""
-        out = np.zeros((self.n + 1,) + x.shape[1:])
-        src = np.concatenate([x, np.zeros((1,) + x.shape[1:])])
-        for grid, frame in self.levels:
-            run = np.cumsum(src[grid], axis=1)
-            run += out[frame][:, None]
-            out[grid] = run
-            out[self.n] = 0.0
-        return out[:self.n]
+        src = x[self.order]
+        out = np.empty_like(src)
+        for rows, first, _last, row_chain, held, parent in self.levels:
+            run = np.cumsum(src[rows], axis=0)
+            before = run[first] - src[rows][first]  # the run up to each chain's start
+            if held.any():
+                before[held] -= out[parent]  # plus what its parent bone hangs on
+            run -= before[row_chain]
+            out[rows] = run
+        return out[self.position]
 
     def suffix(self, x: np.ndarray) -> np.ndarray:
         """(n, k): each bone's value plus those of every bone it carries."""
-        acc = np.concatenate([x, np.zeros((1,) + x.shape[1:])])
-        out = np.zeros_like(acc)
-        for grid, frame in reversed(self.levels):
-            run = np.cumsum(acc[grid][:, ::-1], axis=1)[:, ::-1]
-            out[grid] = run
-            np.add.at(acc, frame, run[:, 0])  # each chain's total onto its parent bone
-            acc[self.n] = 0.0
-        return out[:self.n]
+        acc = x[self.order]
+        out = np.empty_like(acc)
+        for rows, first, last, row_chain, held, parent in reversed(self.levels):
+            block = acc[rows]
+            run = np.cumsum(block, axis=0)
+            # from a bone to its chain's end: the run at the end - the run before the bone
+            out[rows] = run[last][row_chain] - run + block
+            if held.any():
+                np.add.at(acc, parent, out[rows][first[held]])  # chains onto their parents
+        return out[self.position]
 
     def chain_suffix(self, x: np.ndarray) -> np.ndarray:
         """(n, k): each bone's value plus those of the bones after it in its
         own chain (not what hangs on them)."""
-        src = np.concatenate([x, np.zeros((1,) + x.shape[1:])])
-        out = np.zeros_like(src)
-        for grid, _frame in self.levels:
-            out[grid] = np.cumsum(src[grid][:, ::-1], axis=1)[:, ::-1]
-        return out[:self.n]
+        src = x[self.order]
+        out = np.empty_like(src)
+        for rows, first, last, row_chain, _held, _parent in self.levels:
+            block = src[rows]
+            run = np.cumsum(block, axis=0)
+            out[rows] = run[last][row_chain] - run + block
+        return out[self.position]

@@ -113,18 +113,19 @@ class ChainKinematics:
         return {"rot": rot, "pivot": pivot, "cog": cog, "com": com, "vcog": vcog, "vec": vec,
                 "vcom": vcom, "omega": omega, "frame_rot": frame_rot, "attach": attach}
 
-    def joint_gap(self) -> float:
+    def joint_gap(self, worst: bool = False):
         """Largest separation of a live pivot, as a fraction of the mean
-        length of the two bones it joins."""
+        length of the two bones it joins (and, with `worst`, its body)."""
         live = self.in_space & self.pivot_alive
         if not live.any():
-            return 0.0
+            return (0.0, 0) if worst else 0.0
         prev = self.prev_body
         length = self.length[self.body_bone].copy()
         has = prev >= 0
         length[has] = 0.5 * (length[has] + length[prev[has]])
-        gaps = chain_gaps(self.state, prev, self.q0, length)
-        return float(gaps[live].max())
+        gaps = np.where(live, chain_gaps(self.state, prev, self.q0, length), 0.0)
+        body = int(np.argmax(gaps))
+        return (float(gaps[body]), body) if worst else float(gaps[body])
 
     def check(self, t: float) -> None:
         """Stop with a clear message when the state is not finite, or when a

@@ -53,6 +53,7 @@ from pymunk import batch
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
 from ..common import SimTree, TreeMotion, locate
+from ...errors import SimulationError
 from ..audit import Ledger, LoadWork, bone_energy, per_tree
 from ..debris import Debris
 from ..events import Event
@@ -86,6 +87,9 @@ class Stats:
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
     notes: list[str] = field(default_factory=list)
     frame_seconds: list[float] = field(default_factory=list)  # physics time of each frame
+
+
+MAX_JOINT_GAP = 0.01  # a pivot opened further (fraction of bone length) stops the bake
 
 
 @dataclass
@@ -222,7 +226,13 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         t0 = time.perf_counter()
         self.read()
         self.check(t)
-        self.stats.max_joint_gap = max(self.stats.max_joint_gap, self.joint_gap())
+        gap, body = self.joint_gap(worst=True)
+        self.stats.max_joint_gap = max(self.stats.max_joint_gap, gap)
+        if gap > MAX_JOINT_GAP:
+            tree, seg = self.locate(int(self.body_bone[body]))
+            raise SimulationError(f"a joint opened to {gap:.1%} of its bones' length (more than "
+                                  f"{MAX_JOINT_GAP:.0%}: the pymunk tier cannot hold it; try "
+                                  "--quality final or --solver full)", tree, seg, t)
         pose_frame = self.reconstruct()
         if self.substep >= self.next_update:  # the frame's pose is the next update's
             self.prev, self.pose, self.fresh = self.pose, pose_frame, True
