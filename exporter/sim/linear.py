@@ -47,13 +47,17 @@ BLAST_SPLIT = 8  # steps per step while a blast acts
 @dataclass
 class HandOff:
     """A tree leaving the linear tier at `substep` (in units of the pymunk
-    tier's substeps, counted from t = 0), in `rot` (B, 3, 3) relative to rest
-    and spinning at `omega` (B, 3) rad/s (its own bones), and why."""
+    tier's substeps, counted from t = 0) = `time` s, in `rot` (B, 3, 3)
+    relative to rest and spinning at `omega` (B, 3) rad/s (its own bones),
+    with hinge angles `q` and rates `v` (2B,), and why."""
 
     tree: int  # index in the trees the tier was given
     substep: int
+    time: float
     rot: np.ndarray
     omega: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
     reason: str
 
 
@@ -237,8 +241,9 @@ class LinearTier:
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
             i = self.members[ti_local]
             self.last_frame[i] = math.ceil(self.step / self.spf) - 1
-            out.append(HandOff(i, self.step * self.ratio, rot_exact[0, lo:hi].copy(),
-                               kin[lo:hi, 6:9].copy(), reason))
+            out.append(HandOff(i, self.step * self.ratio, self.t, rot_exact[0, lo:hi].copy(),
+                               kin[lo:hi, 6:9].copy(), q[2 * lo:2 * hi].copy(),
+                               self.v[2 * lo:2 * hi].copy(), reason))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
             if keep else np.zeros(0, dtype=np.int64)

@@ -20,7 +20,8 @@ projectiles (which can hit any tree) run as one chunk.
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, fields
+import math
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -37,6 +38,7 @@ from .events import TIER, Event
 from .linear import LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
+from .quality import nonlinear_engine
 
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
@@ -63,6 +65,7 @@ class ChunkResult:
     segments: int
     segment_steps: int  # simulated segments x steps (each tier at its own step)
     objects: tuple | None = None  # projectile tracks (shapes, sizes, positions, rotations)
+    reference: list = field(default_factory=list)  # SolveResults of the reference's runs
 
 
 def chunks(trees: list[SimTree], qualities: list[Quality],
@@ -94,61 +97,87 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     loads = SceneLoads(scene, extent)
     frames = scene.frame_count
     substeps = max(1, round(quality.substep_rate / scene.fps))  # the pymunk tier's per frame
+    engine = "pymunk" if quality.tier == "pymunk" else nonlinear_engine(quality)
     if quality.tier == "pymunk":
-        in_pymunk = [True] * len(trees)
+        in_nonlinear = [True] * len(trees)
     else:
-        in_pymunk = [bool(scene.projectiles) and projectile_reaches(scene, t.rig.model)
-                     for t in trees]
-    lin_idx = [i for i, p in enumerate(in_pymunk) if not p]
+        in_nonlinear = [bool(scene.projectiles) and projectile_reaches(scene, t.rig.model)
+                        for t in trees]
+    lin_idx = [i for i, p in enumerate(in_nonlinear) if not p]
     lin = LinearTier([trees[i] for i in lin_idx], scene, quality, loads, substeps, log) \
         if lin_idx else None
     pym: list[tuple[PymunkTier, list[int]]] = []
-    first = [i for i, p in enumerate(in_pymunk) if p]
-    if first:
+    ref_runs: list[tuple[list[int], float, tuple | None]] = []  # (trees, start s, (q, v))
+    first = [i for i, p in enumerate(in_nonlinear) if p]
+    if first and engine == "pymunk":
         tier = PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
         tier.begin()
         pym.append((tier, first))
-    uses = [TierUse("pymunk" if p else "linear") for p in in_pymunk]
+    elif first:
+        ref_runs.append((first, 0.0, None))
+    uses = [TierUse(engine if p else "linear") for p in in_nonlinear]
     handed: list = []
     for f in range(1, frames):
         if lin is not None:
             for ho in lin.advance_frame(f):
                 i = lin_idx[ho.tree]
-                tier = PymunkTier([trees[i]], scene, quality, loads, log=log)
-                tier.begin(ho.substep, StartState(ho.rot, ho.omega))
-                pym.append((tier, [i]))
-                t = ho.substep * tier.h
-                uses[i] = TierUse("linear, then pymunk", round(t, 6), ho.reason)
-                handed.append(Event(t, trees[i].name, TIER, "", f"to pymunk: {ho.reason}"))
-                log(f"t = {t:.3f} s: {trees[i].name} leaves the linear tier ({ho.reason})")
+                if engine == "pymunk":
+                    tier = PymunkTier([trees[i]], scene, quality, loads, log=log)
+                    tier.begin(ho.substep, StartState(ho.rot, ho.omega))
+                    pym.append((tier, [i]))
+                else:  # the reference's hinges are the linear tier's coordinates
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v)))
+                uses[i] = TierUse(f"linear, then {engine}", round(ho.time, 6), ho.reason)
+                handed.append(Event(ho.time, trees[i].name, TIER, "",
+                                    f"to {engine}: {ho.reason}"))
+                log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
+                    f"({ho.reason})")
         for tier, _ in pym:
             tier.advance_frame(f)
         if progress is not None:
             progress(f, frames - 1)
-    # each tree's frames: the linear tier's until it left, the pymunk tier's after
+    # each tree's frames: the linear tier's until it left, the nonlinear engine's after
     motions: list[TreeMotion | None] = [None] * len(trees)
     if lin is not None:
         for k, m in enumerate(lin.motions()):
             motions[lin_idx[k]] = m
+
+    def take(i: int, m: TreeMotion, start: int) -> None:
+        if motions[i] is None:
+            motions[i] = m
+            return
+        mine = motions[i]
+        mine.quaternions[start:] = m.quaternions[start:]
+        mine.pivots[start:] = m.pivots[start:]
+        mine.events.extend(m.events)
+        # the audit goes on: the work done in the linear tier carries over
+        mine.energy[start:] = m.energy[start:]
+        mine.work[start:] = m.work[start:] + lin.ledger.running[lin_idx.index(i)]
+
     for tier, members in pym:
+        start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
         for i, m in zip(members, tier.motions()):
-            if motions[i] is None:
-                motions[i] = m
-            else:
-                start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
-                mine = motions[i]
-                mine.quaternions[start:] = m.quaternions[start:]
-                mine.pivots[start:] = m.pivots[start:]
-                mine.events.extend(m.events)
-                # the audit goes on: the work done in the linear tier carries over
-                mine.energy[start:] = m.energy[start:]
-                mine.work[start:] = m.work[start:] + lin.ledger.running[lin_idx.index(i)]
+            take(i, m, start)
+    objects = None
+    ref_stats = []
+    for members, t0, state in ref_runs:
+        from .reference import ReferenceSolver
+
+        ref = ReferenceSolver([trees[i] for i in members], scene, quality, loads, log=log,
+                              timestep=quality.reference_step)
+        result = ref.run(None, t0, state)
+        ref_stats.append(result)
+        start = math.ceil(round(t0 / ref.h) / ref.spf - 1e-9)
+        for i in members:
+            take(i, result.motions[trees[i].name], start)
+        if result.objects is not None:
+            o = result.objects
+            objects = (o.shapes, o.sizes, o.positions, o.rotations)
     for e in handed:
         i = next(k for k, t in enumerate(trees) if t.name == e.tree)
         motions[i].events.insert(0, e)
         motions[i].events.sort(key=lambda ev: ev.time)
     stats = merge_stats([tier.stats for tier, _ in pym])
-    objects = None
     for tier, _ in pym:
         if tier.projectiles is not None:
             p = tier.projectiles
@@ -159,10 +188,11 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 for tier, members in pym)
     if lin is not None:
         steps += sum(trees[i].rig.model.n_segments for i in lin_idx) * lin.stats.steps
+    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats)
     return ChunkResult(motions, stats, lin.stats if lin is not None else None, uses, h,
                        pym_h.dt_update if pym_h is not None else h,
                        lin.h if lin is not None else None,
-                       sum(t.rig.model.n_segments for t in trees), steps, objects)
+                       sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats)
 
 
 def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, extent: np.ndarray,
@@ -268,8 +298,16 @@ class PlanarLOD:
                 tiers[self.trees[i].name] = use.tier if use.switch is None else \
                     f"{use.tier} at {use.switch:.3f} s ({use.reason})"
         notes = lod_notes(st, lin, quality, meta["substep"])
-        step = sum(s.step_seconds for s in lin) + st.step_seconds
-        update = sum(s.update_seconds for s in lin) + st.update_seconds
+        refs = [r for c in chunks for r in c.reference]
+        if refs:
+            meta["reference_runs"] = len(refs)
+            meta["reference_step"] = quality.reference_step
+            notes += list(dict.fromkeys(n for r in refs for n in r.notes))
+        step = (sum(s.step_seconds for s in lin) + st.step_seconds
+                + sum(r.timing.get("step_seconds", 0.0) for r in refs))
+        update = (sum(s.update_seconds for s in lin) + st.update_seconds
+                  + sum(r.timing.get("update_seconds", 0.0) + r.timing.get("compile_seconds", 0.0)
+                        for r in refs))
         frame_seconds = np.zeros(scene.frame_count - 1)
         for s in [st, *lin]:
             if len(s.frame_seconds):  # a pymunk tier started late covers the last frames

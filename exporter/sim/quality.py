@@ -30,11 +30,31 @@ class Quality:
     joint_correction: float = 0.02
     coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
     linear_rate: float = 48.0  # Hz, the linear tier's implicit steps
-    tier: str = "auto"  # "auto": linear, pymunk when nonlinear; "pymunk": pymunk only
+    tier: str = "auto"  # "auto": linear, nonlinear engine when needed; "pymunk": pymunk only
+    nonlinear: str = "auto"  # trees that leave the linear range: "reference" (MuJoCo,
+    # when installed: "auto") or "pymunk"
+    reference_step: float = 1 / 480  # s, the reference's step when it is the nonlinear engine
+
+
+def reference_available() -> bool:
+    """Whether MuJoCo (the `reference` extra) can be imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("mujoco") is not None
+
+
+def nonlinear_engine(quality: Quality) -> str:
+    """The engine for trees that leave the linear range: "reference" or "pymunk"."""
+    if quality.nonlinear == "auto":
+        return "reference" if reference_available() else "pymunk"
+    return quality.nonlinear
 
 
 QUALITIES = {
-    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 12),
-    "default": Quality("default", 960.0, 120.0, 10, 2, 1 / 30),
-    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0),
+    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 30, linear_rate=24.0,
+                     reference_step=1 / 240),
+    "default": Quality("default", 960.0, 120.0, 10, 2, 0.0, linear_rate=24.0,
+                       reference_step=1 / 480),
+    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0,
+                     reference_step=1 / 1000),
 }

@@ -774,8 +774,13 @@ class ReferenceSolver:
     # ------------------------------------------------------------------
     # running
 
-    def run(self, progress=None) -> SolveResult:
+    def run(self, progress=None, start: float = 0.0,
+            state: tuple[np.ndarray, np.ndarray] | None = None) -> SolveResult:
         """Simulate the scene; per active tree, the bones' motion at every frame.
+        With `state`, from time `start` (s, rounded to a step) and the
+        hinges' angles and rates (q, v: (2B,), bone b's hinges at 2b, 2b + 1,
+        rad and rad/s from the grown shape) the linear tier handed over: its
+        coordinates are exactly these hinges. Frames before are left zero.
 
         Each step: mj_step1 (kinematics), then, at force updates, read the
         bones, record a frame, handle events and write the held loads
@@ -797,7 +802,11 @@ class ReferenceSolver:
         damped = bool((self.alpha > 0).any())
         steps = (frames - 1) * self.spf
         self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
-        for step in range(steps + 1):
+        first = 0
+        if state is not None:
+            first = min(round(start / self.h), steps)
+            self._set_hinges(*state, first * self.h)
+        for step in range(first, steps + 1):
             t = step * self.h
             t0 = time.perf_counter()
             if n_proj and not launched.all():
@@ -865,6 +874,16 @@ class ReferenceSolver:
                           * len(steps), **frame_timing(per_frame, self.spf))
         return SolveResult(motions, self.objects(), meta, notes,
                            {t.name: "reference" for t in self.trees}, timing)
+
+    def _set_hinges(self, q: np.ndarray, v: np.ndarray, t: float) -> None:
+        """Start from hinge angles q and rates v (2B,), at time t."""
+        angles, rates = q.reshape(-1, 2), v.reshape(-1, 2)
+        for g in self.groups:
+            has = g.hinge_qpos >= 0
+            g.data.qpos[g.hinge_qpos[has]] = angles[g.bones][has]
+            g.data.qvel[g.hinge_dof[has]] = rates[g.bones][has]
+            g.data.time = t
+            mujoco.mj_forward(g.model, g.data)
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray) -> None:
         n = self.n
