@@ -12,10 +12,12 @@ from pathlib import Path
 from . import __version__
 from .errors import InputError, TreebakeError
 from .fileio import write_text
+from .library import resolve
 
 
 def _add_grammar_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("grammar", help="grammar file (.lsys)")
+    p.add_argument("grammar", help="grammar file (.lsys) or bundled grammar name (oak, "
+                                   "forest/birch; `treebake list`)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
     p.add_argument("--iterations", "-n", type=int, default=None,
                    help="derivation steps (default: grammar's)")
@@ -36,7 +38,7 @@ def _limits(args):
 def cmd_derive(args) -> int:
     from .lsystem import derive, format_modules, load_grammar
 
-    grammar = load_grammar(args.grammar)
+    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
     d = derive(grammar, args.seed, args.iterations, _limits(args))
     text = format_modules(d.modules)
     if args.output:
@@ -82,7 +84,7 @@ def cmd_inspect(args) -> int:
     from .preview import model_preview
     from .turtle import interpret
 
-    grammar = load_grammar(args.grammar)
+    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
     d = derive(grammar, args.seed, args.iterations, _limits(args))
     model = interpret(d.modules, grammar, seed=d.seed)
     summary = inspect_summary(model, d)
@@ -106,20 +108,12 @@ def load_job(path: str, args):
     """A scene file, or a grammar baked alone in a default scene (a gusty
     moderate breeze unless --wind says otherwise). Command-line overrides
     are validated like the file's own keys."""
-    from .scene import load_scene, parse_scene
+    from .scene import load_job as load
 
-    p = Path(path)
     overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
                                    ("seed", args.seed), ("quality", args.quality),
                                    ("wind.speed", args.wind)) if v is not None}
-    if p.suffix != ".lsys":
-        return load_scene(p, overrides)
-    if not p.is_file():
-        raise InputError(f"{p}: grammar file not found")
-    raw = {"name": p.stem, "tree": [{"grammar": str(p.resolve())}],
-           "wind": {"speed": overrides.pop("wind.speed", 6.7), "turbulence": 0.25}}
-    raw.update(overrides)
-    return parse_scene(raw, file=str(p))
+    return load(resolve(path), overrides)
 
 
 def _parse_timestep(text: str) -> float:
@@ -384,7 +378,8 @@ def _batch_display(total: int):
 def cmd_sway(args) -> int:
     from .sway import pull_release
 
-    r = pull_release(args.grammar, seed=args.seed, quality=args.quality)
+    r = pull_release(resolve(args.grammar, ("grammar",)), seed=args.seed,
+                     quality=args.quality)
     data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
             "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
             "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),
@@ -396,6 +391,27 @@ def cmd_sway(args) -> int:
               f"{r.force:.0f} N to {r.deflection:.3f} m and released: first sway "
               f"{r.frequency:.3f} Hz (rig estimate {r.rayleigh_frequency:.3f} Hz), damping "
               f"ratio {r.damping:.3f}")
+    return 0
+
+
+def cmd_list(args) -> int:
+    from . import library
+
+    entries = [*library.grammars(), *library.presets()]
+    entries = [e for e in entries if args.kind in (None, e.kind + "s")]
+    if args.json:
+        print(json.dumps([{"kind": e.kind, "name": e.name, "path": str(e.path),
+                           "description": e.description} for e in entries]))
+        return 0
+    for kind, how in (("grammar", "treebake bake NAME"), ("preset", "treebake bake preset:NAME")):
+        group = [e for e in entries if e.kind == kind]
+        if group:
+            print(f"{kind}s ({how}):")
+            width = max(len(e.name) for e in group)
+            for e in group:
+                text = e.description if len(e.description) <= 72 else \
+                    e.description[:71].rstrip() + "…"
+                print(f"  {e.name:<{width}}  {text}")
     return 0
 
 
@@ -470,7 +486,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Grow, rig and simulate the trees of a scene file (TOML, "
                                    "docs/scenes.md), or one grammar in a gusty breeze, and "
                                    "write the bake (.npz, docs/formats.md) into OUT/<name>/.")
-    p.add_argument("job", help="scene file (.toml) or grammar (.lsys)")
+    p.add_argument("job", help="scene file (.toml), grammar (.lsys), a bundled grammar's name "
+                               "(oak) or preset:NAME (preset:felling); `treebake list`")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--name", help="job name: the output subfolder (default: the scene's name)")
     p.add_argument("--solver", choices=("planar", "full"), default="planar",
@@ -558,11 +575,19 @@ def build_parser() -> argparse.ArgumentParser:
                                    "moves 1 %% of the height, release it in still air, and "
                                    "measure the first sway frequency and damping ratio (the "
                                    "field method).")
-    p.add_argument("grammar", help="grammar file (.lsys)")
+    p.add_argument("grammar", help="grammar file (.lsys) or bundled grammar name (oak)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
     p.add_argument("--quality", choices=("draft", "default", "final"), default="default")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_sway)
+
+    p = sub.add_parser("list", help="the bundled grammars and scene presets",
+                       description="List the species grammars and scene presets that ship with "
+                                   "treebake, by the names the commands accept: `treebake bake "
+                                   "oak`, `treebake bake preset:felling`.")
+    p.add_argument("kind", nargs="?", choices=("grammars", "presets"), help="only these")
+    p.add_argument("--json", action="store_true", help="as JSON (with each file's path)")
+    p.set_defaults(func=cmd_list)
 
     p = sub.add_parser("accuracy", help="error against run time: the LOD vs the full reference",
                        description="Bake species x scenarios with the full 3D reference at a "

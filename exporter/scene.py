@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import InputError, SceneError
 from .sim.quality import QUALITIES, Quality
 
 BEAUFORT = {  # m/s, lower bounds (WMO)
@@ -254,6 +254,23 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
                 raw[key] = value
         digest.update(repr(sorted(overrides.items())).encode())
     return parse_scene(raw, file=str(p), base=p.parent, source_hash=digest.hexdigest())
+
+
+def load_job(path: str | Path, overrides: dict | None = None) -> Scene:
+    """A scene file, or a grammar (.lsys) baked alone in a default scene: a
+    gusty moderate breeze (6.7 m/s at 10 m, turbulence 0.25) unless
+    `overrides["wind.speed"]` says otherwise. Overrides are checked like
+    the file's own keys."""
+    p = Path(path)
+    overrides = dict(overrides or {})
+    if p.suffix != ".lsys":
+        return load_scene(p, overrides)
+    if not p.is_file():
+        raise InputError(f"{p}: grammar file not found")
+    raw = {"name": p.stem, "tree": [{"grammar": str(p.resolve())}],
+           "wind": {"speed": overrides.pop("wind.speed", 6.7), "turbulence": 0.25}}
+    raw.update(overrides)
+    return parse_scene(raw, file=str(p))
 
 
 def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
