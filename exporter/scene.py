@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError, SceneError
+from .names import MAX_TREE_NAME, is_valid, make_valid
 from .sim.quality import QUALITIES, Quality
 
 BEAUFORT = {  # m/s, lower bounds (WMO)
@@ -29,7 +30,7 @@ BEAUFORT = {  # m/s, lower bounds (WMO)
 @dataclass
 class TreeSpec:
     grammar: Path
-    name: str
+    name: str  # unique in the scene, a name every tool keeps (names.py)
     position: tuple[float, float] = (0.0, 0.0)  # m
     rotation: float = 0.0  # degrees about Z
     seed: int | None = None
@@ -161,6 +162,7 @@ class Scene:
 class _Reader:
     def __init__(self, file: str):
         self.file = file
+        self.tree_names: set[str] = set()
 
     def fail(self, key: str, message: str) -> SceneError:
         return SceneError(key, message, self.file)
@@ -299,7 +301,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     scene.formats = tuple(formats)
 
     for i, t in enumerate(_array(r, raw, "tree")):
-        scene.trees.append(_tree(r, t, f"tree[{i}].", base, f"tree{i}"))
+        scene.trees.append(_tree(r, t, f"tree[{i}].", base))
     if "forest" in raw:
         scene.trees.extend(_forest(r, r.table(raw["forest"], "forest"), base, scene.seed,
                                    len(scene.trees)))
@@ -307,6 +309,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         raise r.fail("tree", "the scene has no trees: add [[tree]] tables or a [forest]")
     if len(scene.trees) > 5000:
         raise r.fail("forest.count", f"{len(scene.trees)} trees is more than the limit of 5000")
+    _name_trees(scene.trees)
 
     if "wind" in raw:
         scene.wind = _wind(r, r.table(raw["wind"], "wind"))
@@ -409,7 +412,42 @@ def _quality(r: _Reader, q: Any) -> Quality:
     return out
 
 
-def _tree(r: _Reader, t: dict, p: str, base: Path, default_name: str) -> TreeSpec:
+def _name_trees(trees: list[TreeSpec]) -> None:
+    """Trees without a `name` are named after their grammar file (`oak`;
+    `oak_1`, `oak_2`, ... when several share it), never taking a given name."""
+    taken = {t.name for t in trees if t.name}
+    stems = [make_valid(t.grammar.stem) for t in trees]
+    count: dict[str, int] = {}
+    for t, stem in zip(trees, stems):
+        if not t.name:
+            count[stem] = count.get(stem, 0) + 1
+    seen: dict[str, int] = {}
+    for t, stem in zip(trees, stems):
+        if t.name:
+            continue
+        name = stem if count[stem] == 1 and stem not in taken else None
+        while name is None or name in taken:
+            seen[stem] = seen.get(stem, 0) + 1
+            name = f"{stem}_{seen[stem]}"
+        t.name = name
+        taken.add(name)
+
+
+def _tree_name(r: _Reader, t: dict, p: str, given: set[str]) -> str:
+    if "name" not in t:
+        return ""
+    name = r.string(t, "name", p)
+    if not is_valid(name) or len(name) > MAX_TREE_NAME:
+        raise r.fail(f"{p}name", f"= {name!r} must be ASCII letters, digits and _, starting "
+                     f"with a letter or _, at most {MAX_TREE_NAME} characters (names that "
+                     "three.js, Blender, Maya, Houdini and USD keep unchanged)")
+    if name in given:
+        raise r.fail(f"{p}name", f"= {name!r} is already another tree's name")
+    given.add(name)
+    return name
+
+
+def _tree(r: _Reader, t: dict, p: str, base: Path) -> TreeSpec:
     r.check_keys(t, p, {"grammar", "name", "position", "rotation", "seed", "iterations",
                         "quality"})
     grammar = base / r.string(t, "grammar", p)
@@ -420,7 +458,7 @@ def _tree(r: _Reader, t: dict, p: str, base: Path, default_name: str) -> TreeSpe
         raise r.fail(f"{p}quality", f"= {q!r} is not one of: {', '.join(QUALITIES)}")
     return TreeSpec(
         grammar=grammar,
-        name=r.string(t, "name", p, default_name),
+        name=_tree_name(r, t, p, r.tree_names),
         position=r.vector(t, "position", p, 2, (0.0, 0.0)),
         rotation=r.number(t, "rotation", p, 0.0, -360.0, 360.0),
         seed=r.number(t, "seed", p, -1, 0, 2**63 - 1, integer=True) if "seed" in t else None,
@@ -459,7 +497,7 @@ def _forest(r: _Reader, f: dict, base: Path, scene_seed: int, first: int) -> lis
                      f"with min_spacing {spacing} m; enlarge the area or lower the spacing")
     out = []
     for i, (x, y) in enumerate(points):
-        out.append(TreeSpec(grammar=paths[i % len(paths)], name=f"forest{i}",
+        out.append(TreeSpec(grammar=paths[i % len(paths)], name="",
                             position=(center[0] + x, center[1] + y),
                             rotation=float(rng.uniform(0, 360)), seed=int(rng.integers(2**31)),
                             iterations=iterations))

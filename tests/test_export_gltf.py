@@ -17,6 +17,7 @@ from validator import validate
 from treebake.exchange.anim import ReduceOptions
 from treebake.exchange.gltf import export_gltf
 from treebake.exchange.mesh import MeshOptions, tree_mesh
+from treebake.names import joint_names
 
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up
 
@@ -44,7 +45,7 @@ def test_khronos_validator_passes_gltf_bin_and_split_files(tmp_path):
     assert [f.suffix for f in files] == [".gltf", ".bin"]
     files += _export(bake, tmp_path / "split", split=True).files
     assert {f.name for f in files if "split" in str(f)} == {
-        "job.tree0.glb", "job.tree1.glb", "job.objects.glb"}
+        "job.sapling.glb", "job.oak.glb", "job.objects.glb"}
     reports = validate([f for f in files if f.suffix in (".glb", ".gltf")])
     assert len(reports) == 4
     for report in reports:
@@ -61,7 +62,8 @@ def _float32_tol(bake) -> float:
 def _joint_errors(bake, g: Gltf, tree, frames):
     skin = next(s for s in g.g.skins if s.name == tree.name)
     names = [g.g.nodes[j].name for j in skin.joints]
-    assert names == tree.paths  # one joint per segment, named by its path
+    assert names == joint_names(tree.name, tree.paths)  # one joint per segment
+    assert [g.g.nodes[j].extras["segment_path"] for j in skin.joints] == tree.paths
     worst_p = worst_a = 0.0
     for f in frames:
         w = g.worlds(skin.joints, float(np.float32(bake.times[f])))

@@ -4,9 +4,11 @@ rigid nodes. Units metres, Y up ((x, y, z) -> (x, z, -y), see axes.py).
 
 Layout per animated tree: a root node named after the tree (identity
 transform, the skin's `skeleton`) whose descendants are the joint nodes
-(one per segment, named by its path, parented like the segments); a
-separate root node holds the mesh and the skin (glTF ignores a skinned mesh
-node's own transform, so it has none). A joint's node transform is its
+(one per segment, parented like the segments, named `<tree>_<limb>_s<k>`
+as names.py makes them, the segment path in `extras.segment_path`); a
+separate root node `<tree>_mesh` holds the mesh and the skin (glTF ignores
+a skinned mesh node's own transform, so it has none). Every node name is
+unique in the file and kept unchanged by three.js, Blender, Maya, Houdini. A joint's node transform is its
 frame-0 local transform; channels exist only where it changes. Static
 trees are plain meshes with no joints and no animation.
 """
@@ -24,6 +26,7 @@ from .. import __version__
 from ..bake import Bake
 from ..fileio import write_bytes
 from .anim import Animation, ReduceOptions, animate, subtree_reach
+from ..names import joint_names
 from .axes import points_y_up, quats_y_up
 from .mesh import TreeMesh, object_mesh
 
@@ -209,16 +212,18 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
               first: int) -> None:
     """Tree i; its joints are rows first..first+S-1 of `anim`."""
     tree = bake.trees[i]
+    # mesh names differ from node names: three.js names a mesh's objects by
+    # both, and would suffix the second one it met
     if anim is None:
-        doc.node({"name": tree.name, "mesh": doc.mesh(mesh, tree.name, skinned=False)},
+        doc.node({"name": tree.name, "mesh": doc.mesh(mesh, f"{tree.name}_geo", skinned=False)},
                  root=True)
         return
     S = tree.n_segments
     root = doc.node({"name": tree.name}, root=True)
     base = len(doc.nodes)
-    for s in range(S):
-        doc.node({"name": tree.paths[s],
-                  **_trs(anim.translation[first + s], anim.rotation[first + s])})
+    for s, name in enumerate(joint_names(tree.name, tree.paths)):
+        doc.node({"name": name, **_trs(anim.translation[first + s], anim.rotation[first + s]),
+                  "extras": {"segment_path": tree.paths[s]}})
     children: dict[int, list[int]] = {}
     for s in range(S):
         children.setdefault(int(tree.seg_parent[s]), []).append(base + s)
@@ -232,7 +237,8 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
     ibm_acc = doc.buf.add(ibm.reshape(S, 16), FLOAT, "MAT4")
     doc.skins.append({"name": tree.name, "inverseBindMatrices": ibm_acc,
                       "skeleton": root, "joints": list(range(base, base + S))})
-    doc.node({"name": f"{tree.name}.mesh", "mesh": doc.mesh(mesh, tree.name, skinned=True),
+    doc.node({"name": f"{tree.name}_mesh", "mesh": doc.mesh(mesh, f"{tree.name}_geo",
+                                                             skinned=True),
               "skin": len(doc.skins) - 1}, root=True)
 
 
@@ -292,8 +298,8 @@ def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objec
         for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
             key = (shape, float(size))
             if key not in shared:
-                shared[key] = doc.mesh(object_mesh(shape, float(size)), f"{shape} {size:g} m",
-                                       skinned=False)
+                shared[key] = doc.mesh(object_mesh(shape, float(size)),
+                                       f"{shape}_{round(float(size) * 1000)}mm", skinned=False)
             joint_node[obj_first + k] = doc.node({
                 "name": f"projectile_{k}", "mesh": shared[key],
                 **_trs(anim.translation[obj_first + k], anim.rotation[obj_first + k])}, root=True)

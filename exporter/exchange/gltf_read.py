@@ -1,7 +1,7 @@
 """Read the motion back out of a treebake glTF (.glb or .gltf + .bin), as a
 Bake, so `treebake diff` can compare exported files.
 
-Each skin is a tree: its joints are the segments (named by their paths),
+Each skin is a tree: its joints are the segments (paths in node extras),
 parented like the segments, each joint's rest rotation the identity and its
 rest position the inverse bind matrix's translation. Channels are sampled at
 every frame (the frame grid is in `asset.extras.treebake`, written by our
@@ -140,7 +140,9 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
         for s in range(S):  # a segment ends where its first child starts
             kids = np.nonzero(seg_parent == s)[0]
             end[s] = kids[0] if len(kids) else s
-        paths = [nodes[j].get("name", f"joint{s}") for s, j in enumerate(joints)]
+        # the segment path rides in extras (node names are made tool-safe)
+        paths = [nodes[j].get("extras", {}).get("segment_path", nodes[j].get("name", f"joint{s}"))
+                 for s, j in enumerate(joints)]
         trees.append(TreeBake(
             name=skin.get("name", f"tree{len(trees)}"), points=rest,
             seg_start=np.arange(S), seg_end=end, seg_parent=seg_parent,

@@ -6,9 +6,10 @@ Stage metadata: upAxis "Y" (coordinates converted like glTF:
 (x, y, z) -> (x, z, -y)), metersPerUnit 1, timeCodesPerSecond =
 framesPerSecond = the bake's fps, startTimeCode 1, endTimeCode = frame count
 (time code = bake frame index + 1, the OBJ sequence's numbering), defaultPrim
-= the job's root Xform. Joints are named "s<segment>" in a path hierarchy
-("s0/s1/s5"); the original segment paths are in the Skeleton's
-`treebake:segmentPaths` attribute. Static trees are plain meshes.
+= the job's root Xform. Joints carry the glTF joint names (names.py,
+`oak_trunk_2_1_s3`) in a path hierarchy that follows the segments; the
+original segment paths are in the Skeleton's `treebake:segmentPaths`
+attribute. Static trees are plain meshes.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 from ..bake import Bake
 from ..errors import TreebakeError
 from ..fileio import write_bytes
+from ..names import joint_names
 from ..rotations import continuous, qnormalize
 from .anim import local_transforms
 from .axes import points_y_up, quats_y_up
@@ -47,11 +49,12 @@ class UsdResult:
     validation_errors: list[str] = field(default_factory=list)
 
 
-def joint_tokens(parent: np.ndarray) -> list[str]:
-    """UsdSkel joint paths: "s<i>" under its parent's path."""
+def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
+    """UsdSkel joint paths: each joint's name under its parent's path, so the
+    path follows the tree (`oak_trunk_s0/oak_trunk_s1/oak_trunk_1_s0`)."""
     out: list[str] = []
     for s, p in enumerate(parent.tolist()):  # parents come first
-        out.append(f"s{s}" if p < 0 else f"{out[p]}/s{s}")
+        out.append(names[s] if p < 0 else f"{out[p]}/{names[s]}")
     return out
 
 
@@ -154,9 +157,10 @@ class _Writer:
         path = self.unique(self.root, t.name)
         self.UsdSkel.Root.Define(self.stage, path)
         skel = self.UsdSkel.Skeleton.Define(self.stage, f"{path}/Skel")
-        tokens = joint_tokens(t.seg_parent)
+        names = joint_names(t.name, t.paths)
+        tokens = joint_tokens(t.seg_parent, names)
         skel.CreateJointsAttr(Vt.TokenArray(tokens))
-        skel.CreateJointNamesAttr(Vt.TokenArray([self.ident(p) for p in t.paths]))
+        skel.CreateJointNamesAttr(Vt.TokenArray(names))
         rest = points_y_up(t.points[t.seg_start]).astype(np.float64)
         S = t.n_segments
         bind = np.tile(np.eye(4), (S, 1, 1))
