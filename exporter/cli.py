@@ -209,6 +209,9 @@ def _add_export_options(p: argparse.ArgumentParser) -> None:
                    help="keep every frame of every channel that changes")
     g.add_argument("--stride", type=int, default=1, help="OBJ sequences: every n-th frame")
     g.add_argument("--size", type=int, default=256, help="preview panel size, px")
+    g.add_argument("--frame-start", type=int, default=None,
+                   help="number of the first frame in every format (default: the scene's "
+                        "frame_start, 1)")
 
 
 def _export_options(args):
@@ -224,7 +227,8 @@ def _export_options(args):
         reduce=ReduceOptions(position_tolerance=args.position_tolerance,
                              angle_tolerance=math.radians(args.angle_tolerance),
                              enabled=not args.no_reduce),
-        split=args.split, obj_stride=args.stride, preview_size=args.size)
+        split=args.split, obj_stride=args.stride, preview_size=args.size,
+        frame_start=args.frame_start)
 
 
 def _stage_progress():
@@ -510,7 +514,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "preview (default: the scene's `formats`, else only the "
                                     ".npz bake)")
     p.set_defaults(func=cmd_bake, radial=8, rings=1, no_leaves=False, position_tolerance=0.002,
-                   angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256)
+                   angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256,
+                   frame_start=None)
 
     p = sub.add_parser("export", help="export a bake to glTF, OBJ sequences, USD, previews",
                        description="Write a bake (.npz) as animated glTF 2.0 (.glb or "

@@ -21,6 +21,7 @@ from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
 from .fileio import atomic_path, write_text
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "preview")
+MAX_FRAME_START = 1_000_000
 ALIASES = {"npz": None}  # the bake itself: always written by `treebake bake`
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total)
@@ -30,7 +31,8 @@ Progress = Callable[[str, int, int], None]  # (stage, done, total)
 class ExportOptions:
     """formats: any of FORMATS; split: one glTF file per tree;
     obj_stride: write every n-th frame of OBJ sequences; preview_size: px
-    per view panel."""
+    per view panel; frame_start: the number of the bake's first frame in
+    every format (None: the bake's, from its scene; default 1)."""
 
     formats: tuple[str, ...] = ("glb",)
     mesh: MeshOptions = field(default_factory=MeshOptions)
@@ -38,6 +40,7 @@ class ExportOptions:
     split: bool = False
     obj_stride: int = 1
     preview_size: int = 256
+    frame_start: int | None = None
 
 
 @dataclass
@@ -80,6 +83,9 @@ def check_options(opts: ExportOptions) -> None:
                          f"{math.degrees(r.angle_tolerance)}")
     if not 64 <= opts.preview_size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {opts.preview_size}")
+    if opts.frame_start is not None and not 0 <= opts.frame_start <= MAX_FRAME_START:
+        raise InputError(f"--frame-start must be in 0..{MAX_FRAME_START}, got "
+                         f"{opts.frame_start}")
 
 
 def sha256(path: Path) -> str:
@@ -113,6 +119,11 @@ def _inputs(bake: Bake, bake_path: Path | None) -> dict:
     return out
 
 
+def frame_start(bake: Bake, opts: ExportOptions) -> int:
+    """The number the bake's first frame gets in the files."""
+    return int(bake.meta.get("frame_start", 1)) if opts.frame_start is None else opts.frame_start
+
+
 def _settings(opts: ExportOptions) -> dict:
     m, r = opts.mesh, opts.reduce
     return {"formats": list(opts.formats), "radial": m.radial, "rings_per_segment": m.rings,
@@ -120,6 +131,7 @@ def _settings(opts: ExportOptions) -> dict:
             "keyframe_reduction": r.enabled, "position_tolerance_m": r.position_tolerance,
             "angle_tolerance_deg": round(math.degrees(r.angle_tolerance), 9),
             "split": opts.split, "obj_stride": opts.obj_stride,
+            "frame_start": opts.frame_start,
             "preview_size_px": opts.preview_size, "up_axis": "Y", "units": "m"}
 
 
@@ -157,8 +169,11 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     manifest: dict = {"tool": f"treebake {__version__}", "job": name,
                       "inputs": _inputs(bake, bake_path), "settings": _settings(opts)}
     n = len(bake.times)
-    manifest["frames"] = {"count": n, "fps": bake.fps, "first": 1, "last": n,
-                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1])}
+    first = frame_start(bake, opts)
+    manifest["frames"] = {"count": n, "fps": bake.fps, "first": first, "last": first + n - 1,
+                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1]),
+                          "gltf_start_s": first / bake.fps,
+                          "extra_samples": sum(len(t.extra_times) for t in bake.trees)}
     manifest["sizes"] = {
         "trees": len(bake.trees), "animated_trees": sum(not t.static for t in bake.trees),
         "segments": sum(t.n_segments for t in bake.trees),
@@ -174,7 +189,7 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
 
             tick(fmt, 0, 1)
             res = export_gltf(bake, meshes, folder, name, binary=fmt == "glb", split=opts.split,
-                              opts=opts.reduce)
+                              opts=opts.reduce, frame_start=first)
             files += res.files
             manifest["animation"] = _rounded(res.animation)
             manifest["animation"]["tolerances"] = {
@@ -185,16 +200,17 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         from .exchange.obj import export_obj
 
         res = export_obj(bake, meshes, folder / "obj", name, opts.obj_stride,
-                         progress=lambda d, t: tick("obj", d, t))
+                         progress=lambda d, t: tick("obj", d, t), frame_start=first)
         files += res.files
         manifest["frames"]["obj"] = {"stride": opts.obj_stride, "files": len(res.frames),
-                                     "first": res.frames[0] + 1, "last": res.frames[-1] + 1}
+                                     "first": res.frames[0] + first,
+                                     "last": res.frames[-1] + first}
     for fmt in ("usd", "usda"):
         if fmt in opts.formats:
             from .exchange.usd import export_usd
 
             res = export_usd(bake, meshes, folder, name, ascii=fmt == "usda",
-                             progress=lambda d, t, f=fmt: tick(f, d, t))
+                             progress=lambda d, t, f=fmt: tick(f, d, t), frame_start=first)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))

@@ -149,6 +149,7 @@ class Scene:
     pulls: list[PullSpec] = field(default_factory=list)
     camera: CameraSpec | None = None
     formats: tuple[str, ...] = ()  # exported by `treebake bake` unless --format says otherwise
+    frame_start: int = 1  # the number of the first frame in every exported format
 
     @property
     def frame_count(self) -> int:
@@ -280,7 +281,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     r = _Reader(file)
     top = {"name", "duration", "fps", "seed", "gravity", "prestress", "ground", "quality",
            "tree", "forest", "wind", "explosion", "vortex", "attractor", "projectile", "cut",
-           "pull", "camera", "formats"}
+           "pull", "camera", "formats", "frame_start"}
     r.check_keys(raw, "", top)
     scene = Scene(
         name=r.string(raw, "name", "", Path(file).stem),
@@ -292,6 +293,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         gravity=r.number(raw, "gravity", "", 9.81, 0.0, 100.0),
         prestress=r.boolean(raw, "prestress", "", True),
         ground=r.boolean(raw, "ground", "", True),
+        frame_start=r.number(raw, "frame_start", "", 1, 0, 1_000_000, integer=True),
     )
     scene.quality = _quality(r, raw.get("quality", "default"))
     formats = raw.get("formats", [])

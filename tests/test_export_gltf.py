@@ -66,7 +66,7 @@ def _joint_errors(bake, g: Gltf, tree, frames):
     assert [g.g.nodes[j].extras["segment_path"] for j in skin.joints] == tree.paths
     worst_p = worst_a = 0.0
     for f in frames:
-        w = g.worlds(skin.joints, float(np.float32(bake.times[f])))
+        w = g.worlds(skin.joints, float(np.float32(bake.times[f] + 1 / bake.fps)))
         p = tree.positions[f].astype(np.float64) @ C.T
         worst_p = max(worst_p, float(np.linalg.norm(w[:, :3, 3] - p, axis=1).max()))
         for s in range(tree.n_segments):
@@ -111,7 +111,7 @@ def test_projectiles_are_animated_nodes(tmp_path):
     for k in range(len(o.sizes)):
         node = g.node_index(f"projectile_{k}")
         for f in range(0, len(bake.times), 5):
-            w = g.world(node, float(np.float32(bake.times[f])))
+            w = g.world(node, float(np.float32(bake.times[f] + 1 / bake.fps)))
             np.testing.assert_allclose(w[:3, 3], C @ o.positions[f, k], atol=_float32_tol(bake))
             np.testing.assert_allclose(w[:3, :3], C @ quat_to_matrix(o.rotations[f, k]) @ C.T,
                                        atol=2e-6)

@@ -102,8 +102,10 @@ class GltfResult:
 
 
 class _Document:
-    def __init__(self, name: str, extras: dict | None = None) -> None:
+    def __init__(self, name: str, extras: dict | None = None,
+                 scene_extras: dict | None = None) -> None:
         self.extras = extras or {}
+        self.scene_extras = scene_extras or {}
         self.buf = _Buffer()
         self.nodes: list[dict] = []
         self.meshes: list[dict] = []
@@ -179,8 +181,10 @@ class _Document:
         asset = {"version": "2.0", "generator": f"treebake {__version__}"}
         if self.extras:
             asset["extras"] = {"treebake": self.extras}
-        doc = {"asset": asset,
-               "scene": 0, "scenes": [{"name": self.name, "nodes": self.roots}],
+        scene = {"name": self.name, "nodes": self.roots}
+        if self.scene_extras:  # Blender makes these the scene's custom properties
+            scene["extras"] = self.scene_extras
+        doc = {"asset": asset, "scene": 0, "scenes": [scene],
                "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
         if self.skins:
             doc["skins"] = self.skins
@@ -242,57 +246,92 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
               "skin": len(doc.skins) - 1}, root=True)
 
 
-def scene_animation(bake: Bake, trees: list[int], objects: bool,
-                    opts: ReduceOptions) -> tuple[Animation | None, dict[int, int], int]:
-    """Channels for the animated trees in `trees` (and the projectiles), all
-    reduced together (vectorised), each tree with its own error check.
-    Returns the animation, each tree's first joint row, and the first
-    projectile row."""
-    moving = [i for i in trees if not bake.trees[i].static]
+@dataclass
+class AnimationPart:
+    """Channels of trees sharing one time grid: `times` (N,) s of the bake
+    (its frames, plus a tree's extra sub-frame samples), each tree's first
+    joint row (`first`) and the projectiles' first row (or None)."""
+
+    anim: Animation
+    times: np.ndarray
+    first: dict[int, int]
+    obj_first: int | None = None
+
+
+def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: bool,
+                     opts: ReduceOptions) -> AnimationPart | None:
     first: dict[int, int] = {}
     parents, pos, rot, vec, reach, group = [], [], [], [], [], []
     n = 0
-    for g, i in enumerate(moving):
+    for g, i in enumerate(trees):
         t = bake.trees[i]
         first[i] = n
+        _, p, q = t.samples(bake.times)
         parents.append(np.where(t.seg_parent >= 0, t.seg_parent + n, -1))
-        pos.append(points_y_up(t.positions))
-        rot.append(quats_y_up(t.rotations))
+        pos.append(points_y_up(p))
+        rot.append(quats_y_up(q))
         b, e = points_y_up(t.points[t.seg_start]), points_y_up(t.points[t.seg_end])
         vec.append(e - b)
         margin = float(t.leaf_size.max(initial=0.0)) + float(t.width.max(initial=0.0))
         reach.append(subtree_reach(t.seg_parent, b, e) + margin)
         group.append(np.full(t.n_segments, g))
         n += t.n_segments
-    obj_first = n
+    obj_first = None
     if objects and bake.objects is not None and len(bake.objects.sizes):
         o = bake.objects
         k = len(o.sizes)
+        obj_first = n
         parents.append(np.full(k, -1))
         pos.append(points_y_up(o.positions))
         rot.append(quats_y_up(o.rotations))
         vec.append(np.zeros((k, 3)))
         reach.append(np.asarray(o.sizes, np.float64))
-        group.append(len(moving) + np.arange(k))
+        group.append(len(trees) + np.arange(k))
     if not parents:
-        return None, first, obj_first
+        return None
     anim = animate(np.concatenate(parents), np.concatenate(pos, axis=1),
                    np.concatenate(rot, axis=1), np.concatenate(vec), np.concatenate(reach),
-                   opts, np.concatenate(group))
-    return anim, first, obj_first
+                   opts, np.concatenate(group), times=times)
+    return AnimationPart(anim, times, first, obj_first)
+
+
+def scene_animation(bake: Bake, trees: list[int], objects: bool,
+                    opts: ReduceOptions) -> list[AnimationPart]:
+    """Channels for the animated trees in `trees` (and the projectiles),
+    reduced together (vectorised), each tree with its own error check.
+    Trees on the frame grid share one part; a tree with extra sub-frame
+    samples gets a part of its own on its merged grid."""
+    moving = [i for i in trees if not bake.trees[i].static]
+    plain = [i for i in moving if not len(bake.trees[i].extra_times)]
+    parts = [_group_animation(bake, plain, np.asarray(bake.times, np.float64), objects, opts)]
+    for i in moving:
+        if i not in plain:
+            parts.append(_group_animation(bake, [i], bake.trees[i].samples(bake.times)[0],
+                                          False, opts))
+    return [p for p in parts if p is not None]
 
 
 def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objects: bool,
-          opts: ReduceOptions) -> tuple[_Document, Animation | None]:
+          opts: ReduceOptions, frame_start: int = 1) -> tuple[_Document, list[AnimationPart]]:
+    """The glTF document. Key times are (frame_start + frame index) / fps s
+    (bake time + frame_start / fps), so an importer's frame = time x fps
+    (Blender, three.js's AnimationUtils) is the bake's frame number."""
+    n = len(bake.times)
+    fps = bake.fps
+    hint = {"frame_start": frame_start, "frame_end": frame_start + n - 1, "fps": fps}
     # the frame grid, so a reader (treebake diff) can sample reduced channels
-    doc = _Document(name, {"fps": bake.fps, "frames": len(bake.times)})
-    anim, first, obj_first = scene_animation(bake, trees, objects, opts)
-    joint_node: dict[int, int] = {}
+    doc = _Document(name, {"fps": fps, "frames": n, "frame_start": frame_start}, hint)
+    parts = scene_animation(bake, trees, objects, opts)
+    part_of = {i: p for p in parts for i in p.first}
+    joint_node: dict[tuple[int, int], int] = {}  # (part, joint row) -> node
     for i in trees:
-        if i in first:
-            joint_node[first[i]] = len(doc.nodes) + 1  # root node, then the joints
-        _add_tree(doc, bake, i, meshes[i], anim if i in first else None, first.get(i, 0))
-    if objects and bake.objects is not None:
+        part = part_of.get(i)
+        if part is not None:
+            joint_node[(id(part), part.first[i])] = len(doc.nodes) + 1  # the root, then joints
+        _add_tree(doc, bake, i, meshes[i], None if part is None else part.anim,
+                  0 if part is None else part.first[i])
+    obj = next((p for p in parts if p.obj_first is not None), None)
+    if obj is not None:
         o = bake.objects
         shared: dict[tuple, int] = {}
         for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
@@ -300,16 +339,19 @@ def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objec
             if key not in shared:
                 shared[key] = doc.mesh(object_mesh(shape, float(size)),
                                        f"{shape}_{round(float(size) * 1000)}mm", skinned=False)
-            joint_node[obj_first + k] = doc.node({
+            row = obj.obj_first + k
+            joint_node[(id(obj), row)] = doc.node({
                 "name": f"projectile_{k}", "mesh": shared[key],
-                **_trs(anim.translation[obj_first + k], anim.rotation[obj_first + k])}, root=True)
-    if anim is not None:
-        rows = np.array(sorted(joint_node))
-        for ch in anim.channels:
+                **_trs(obj.anim.translation[row], obj.anim.rotation[row])}, root=True)
+    offset = frame_start / fps
+    for part in parts:
+        rows = np.array(sorted(r for (pid, r) in joint_node if pid == id(part)))
+        seconds = part.times + offset
+        for ch in part.anim.channels:
             r = int(rows[np.searchsorted(rows, ch.joint, side="right") - 1])
-            doc.channel(int(joint_node[r] + ch.joint - r), ch.path, bake.times[ch.frames],
-                        ch.values)
-    return doc, anim
+            doc.channel(int(joint_node[(id(part), r)] + ch.joint - r), ch.path,
+                        seconds[ch.frames], ch.values)
+    return doc, parts
 
 
 def write(path: str | Path, doc: _Document) -> list[Path]:
@@ -333,9 +375,10 @@ def write(path: str | Path, doc: _Document) -> list[Path]:
 
 def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                 binary: bool = True, split: bool = False,
-                opts: ReduceOptions | None = None) -> GltfResult:
+                opts: ReduceOptions | None = None, frame_start: int = 1) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
-    `name.<tree>.glb`, and the projectiles in `name.objects.glb`."""
+    `name.<tree>.glb`, and the projectiles in `name.objects.glb`. Bake
+    frame f (0-based) is keyed at (frame_start + f) / fps s."""
     out = Path(out)
     opts = opts or ReduceOptions()
     ext = ".glb" if binary else ".gltf"
@@ -349,16 +392,19 @@ def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
     result = GltfResult()
     reports = []
     for stem, trees, objects in jobs:
-        doc, anim = build(bake, stem, meshes, trees, objects, opts)
+        doc, parts = build(bake, stem, meshes, trees, objects, opts, frame_start)
         result.files += write(out / f"{stem}{ext}", doc)
-        if anim is not None:
-            reports.append(anim.report)
+        reports += [p.anim.report for p in parts]
     for i, m in enumerate(meshes):
         result.vertices += m.n_vertices
         result.triangles += m.n_triangles
         if not bake.trees[i].static:
             result.joints += bake.trees[i].n_segments
     result.animation = merge_reports(reports)
+    if result.animation:
+        result.animation["frames"] = len(bake.times)
+        result.animation["extra_samples"] = sum(len(t.extra_times) for t in bake.trees
+                                                if not t.static)
     return result
 
 

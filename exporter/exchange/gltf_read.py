@@ -5,7 +5,8 @@ Each skin is a tree: its joints are the segments (paths in node extras),
 parented like the segments, each joint's rest rotation the identity and its
 rest position the inverse bind matrix's translation. Channels are sampled at
 every frame (the frame grid is in `asset.extras.treebake`, written by our
-exporter; otherwise the union of the key times) with glTF's LINEAR rule
+exporter: frame f is keyed at (frame_start + f) / fps s; otherwise the
+union of the key times) with glTF's LINEAR rule
 (slerp for rotations), composed down the hierarchy, and turned back from
 Y up to our Z up. Static trees (plain meshes) come back with no segments.
 glTF has no segment tips, so a terminal segment's end is taken at its base:
@@ -106,9 +107,11 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             channels[(ch["target"]["node"], ch["target"]["path"])] = (
                 keys, _accessor(doc, blob, sampler["output"]))
             all_keys.append(keys)
+    offset = 0.0  # key time of the bake's first frame (files before frame_start: 0)
     if "fps" in info and "frames" in info:
-        times = np.arange(int(info["frames"])) / float(info["fps"])
         fps = float(info["fps"])
+        offset = float(info.get("frame_start", 0)) / fps
+        times = np.arange(int(info["frames"])) / fps
     elif all_keys:
         times = np.unique(np.round(np.concatenate(all_keys), 6))
         fps = 1.0 / float(np.min(np.diff(times))) if len(times) > 1 else 24.0
@@ -132,9 +135,10 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             t_loc[:, s] = node.get("translation", [0.0, 0.0, 0.0])
             q_loc[:, s] = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
             if (j, "translation") in channels:
-                t_loc[:, s] = _sample(times, *channels[(j, "translation")], rotation=False)
+                t_loc[:, s] = _sample(times + offset, *channels[(j, "translation")],
+                                      rotation=False)
             if (j, "rotation") in channels:
-                q_loc[:, s] = _sample(times, *channels[(j, "rotation")], rotation=True)
+                q_loc[:, s] = _sample(times + offset, *channels[(j, "rotation")], rotation=True)
         pos, rot = _world(seg_parent, t_loc, q_loc)
         end = np.arange(S)
         for s in range(S):  # a segment ends where its first child starts

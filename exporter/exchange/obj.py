@@ -1,6 +1,6 @@
-"""OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (1-based,
-zero-padded to 4 digits or more: file number = bake frame index + 1), one
-shared `name.mtl`. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
+"""OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (file
+number = frame_start + bake frame index, zero-padded to 4 digits or more),
+one shared `name.mtl`. Frames only: extra sub-frame samples are not written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
 
 Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
 `vn` (one of each per vertex, so faces are `f i/i/i j/j/j k/k/k`) and
@@ -76,8 +76,10 @@ def frame_digits(frames: int) -> int:
 
 
 def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
-               stride: int = 1, progress: Callable[[int, int], None] | None = None) -> ObjResult:
-    """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th frame."""
+               stride: int = 1, progress: Callable[[int, int], None] | None = None,
+               frame_start: int = 1) -> ObjResult:
+    """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th
+    frame, NNNN = frame_start + the bake's frame index."""
     if stride < 1:
         raise ValueError("stride must be >= 1")
     out = Path(out)
@@ -101,9 +103,10 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
     mtl = f"{name}.mtl"
     result.files.append(write_bytes(out / mtl, mtl_text(materials).encode("ascii")))
     frames = list(range(0, len(bake.times), stride))
-    digits = frame_digits(len(bake.times))
+    digits = frame_digits(frame_start + len(bake.times) - 1)
     for done, f in enumerate(frames):
-        header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, frame {f + 1}, "
+        header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, "
+                  f"frame {frame_start + f}, "
                   f"t = {float(bake.times[f]):.6f} s, metres, Y up\n")
         parts = [header, f"mtllib {mtl}\n"]
         for tree, blk in zip(bake.trees, blocks):
@@ -113,7 +116,7 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             p, n = pose_rigid(blk.mesh, bake.objects.positions[f, k].astype(np.float64),
                               bake.objects.rotations[f, k])
             parts.append(_object_text(blk, p, n))
-        path = out / f"{name}.{f + 1:0{digits}d}.obj"
+        path = out / f"{name}.{frame_start + f:0{digits}d}.obj"
         result.files.append(write_bytes(path, "".join(parts).encode("ascii")))
         result.frames.append(f)
         if progress is not None:

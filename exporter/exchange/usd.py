@@ -4,9 +4,10 @@ materials, projectiles as Xforms with time-sampled translate/orient.
 
 Stage metadata: upAxis "Y" (coordinates converted like glTF:
 (x, y, z) -> (x, z, -y)), metersPerUnit 1, timeCodesPerSecond =
-framesPerSecond = the bake's fps, startTimeCode 1, endTimeCode = frame count
-(time code = bake frame index + 1, the OBJ sequence's numbering), defaultPrim
-= the job's root Xform. Joints carry the glTF joint names (names.py,
+framesPerSecond = the bake's fps, startTimeCode = frame_start, endTimeCode =
+frame_start + frames - 1 (time code = frame_start + bake time x fps: frame
+numbers like the OBJ sequence's; extra sub-frame samples get fractional
+codes), defaultPrim = the job's root Xform. Joints carry the glTF joint names (names.py,
 `oak_trunk_2_1_s3`) in a path hierarchy that follows the segments; the
 original segment paths are in the Skeleton's `treebake:segmentPaths`
 attribute. Static trees are plain meshes.
@@ -59,7 +60,7 @@ def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
 
 
 class _Writer:
-    def __init__(self, bake: Bake, name: str) -> None:
+    def __init__(self, bake: Bake, name: str, frame_start: int = 1) -> None:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
         self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
@@ -71,8 +72,9 @@ class _Writer:
         fps = bake.fps
         st.SetTimeCodesPerSecond(fps)
         st.SetFramesPerSecond(fps)
-        st.SetStartTimeCode(1.0)
-        st.SetEndTimeCode(float(len(bake.times)))
+        self.frame_start = frame_start
+        st.SetStartTimeCode(float(frame_start))
+        st.SetEndTimeCode(float(frame_start + len(bake.times) - 1))
         self.root = f"/{self.ident(name)}"
         root = UsdGeom.Xform.Define(st, self.root)
         st.SetDefaultPrim(root.GetPrim())
@@ -175,15 +177,15 @@ class _Writer:
                                        self.Sdf.ValueTypeNames.StringArray).Set(list(t.paths))
         anim = self.UsdSkel.Animation.Define(self.stage, f"{path}/Skel/Anim")
         anim.CreateJointsAttr(Vt.TokenArray(tokens))
-        pos = points_y_up(t.positions)
-        rot = continuous(qnormalize(quats_y_up(t.rotations).astype(np.float64)), axis=0)
+        times, positions, rotations = t.samples(self.bake.times)
+        pos = points_y_up(positions)
+        rot = continuous(qnormalize(quats_y_up(rotations).astype(np.float64)), axis=0)
         t_loc, q_loc = local_transforms(par, pos, rot)
         q_loc = continuous(qnormalize(q_loc), axis=0).astype(np.float32)
         t_loc = t_loc.astype(np.float32)
         ta, ra = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr()
         anim.CreateScalesAttr(Vt.Vec3hArray(S, Gf.Vec3h(1.0, 1.0, 1.0)))
-        for f in range(len(t_loc)):
-            code = float(f + 1)
+        for f, code in enumerate(self.codes(times)):
             ta.Set(Vt.Vec3fArray.FromNumpy(t_loc[f]), code)
             ra.Set(Vt.QuatfArray.FromNumpy(q_loc[f]), code)
         self.UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
@@ -204,8 +206,7 @@ class _Writer:
             x = self.UsdGeom.Xform.Define(self.stage, f"{group}/projectile_{k}")
             tr = x.AddTranslateOp(self.UsdGeom.XformOp.PrecisionDouble)
             orient = x.AddOrientOp(self.UsdGeom.XformOp.PrecisionFloat)
-            for f in range(pos.shape[0]):
-                code = float(f + 1)
+            for f, code in enumerate(self.codes(self.bake.times)):
                 tr.Set(Gf.Vec3d(*pos[f, k].tolist()), code)
                 q = rot[f, k]
                 orient.Set(Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
@@ -213,6 +214,10 @@ class _Writer:
             for part in mesh.parts:
                 part.colour = OBJECT_COLOUR
             self.meshes(f"{group}/projectile_{k}", mesh, None)
+
+    def codes(self, times: np.ndarray) -> list[float]:
+        """USD time codes of sample times (s): frame numbers, fractional between."""
+        return [float(c) for c in self.frame_start + np.asarray(times) * self.bake.fps]
 
     def save(self, path: Path) -> bytes:
         """The stage's bytes in the format the extension asks (.usda text,
@@ -240,10 +245,12 @@ def validate(path: str | Path) -> list[str]:
 
 def export_usd(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                ascii: bool = False, check: bool = True,
-               progress: Callable[[int, int], None] | None = None) -> UsdResult:
-    """Write `out/name.usd` (binary crate) or `out/name.usda` (text)."""
-    w = _Writer(bake, name)
-    result = UsdResult(time_codes=(1.0, float(len(bake.times))))
+               progress: Callable[[int, int], None] | None = None,
+               frame_start: int = 1) -> UsdResult:
+    """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
+    frame f at time code frame_start + f."""
+    w = _Writer(bake, name, frame_start)
+    result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
     for i, mesh in enumerate(meshes):
         result.joints += w.tree(i, mesh)
         if progress is not None:

@@ -39,7 +39,11 @@ loader.parse(buffer, "", (gltf) => {
   const poses = {};
   if (times.length && gltf.animations.length) {
     const mixer = new THREE.AnimationMixer(gltf.scene);
-    mixer.clipAction(gltf.animations[0]).play();
+    // play once and hold the end (looping would wrap t = duration to 0)
+    const action = mixer.clipAction(gltf.animations[0]);
+    action.setLoop(THREE.LoopOnce);
+    action.clampWhenFinished = true;
+    action.play();
     const joints = new Set((json.skins || []).flatMap((s) => s.joints));
     for (const t of times) {
       mixer.setTime(t);
