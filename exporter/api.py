@@ -63,14 +63,9 @@ def export(bake, out: str | Path = "out", formats=("glb",), name: str | None = N
     with manifest.json. `textures=False` writes plain colour materials.
     Other options are ExportOptions fields (split, obj_stride,
     preview_size). Returns the ExportReport (folder, manifest, files)."""
-    from dataclasses import replace
-
     from .export import ExportOptions, export_bake, parse_formats
-    from .exchange.mesh import MeshOptions
 
-    opts = ExportOptions(formats=parse_formats(formats), **options)
-    if not textures:
-        opts = replace(opts, mesh=replace(opts.mesh, textures=False))
+    opts = ExportOptions(formats=parse_formats(formats), textures=textures, **options)
     return export_bake(bake, out, name, opts)
 
 

@@ -199,6 +199,8 @@ def _add_export_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("export options")
     g.add_argument("--split", action="store_true", help="glTF: one file per tree")
     g.add_argument("--no-leaves", action="store_true", help="no leaf quads")
+    g.add_argument("--no-textures", action="store_true",
+                   help="plain colour materials instead of the generated bark and leaf textures")
     g.add_argument("--radial", type=int, default=8, help="vertices around a bark ring (3-64)")
     g.add_argument("--rings", type=int, default=1, help="bark rings per segment (1-16)")
     g.add_argument("--position-tolerance", type=float, default=0.002,
@@ -228,7 +230,7 @@ def _export_options(args):
                              angle_tolerance=math.radians(args.angle_tolerance),
                              enabled=not args.no_reduce),
         split=args.split, obj_stride=args.stride, preview_size=args.size,
-        frame_start=args.frame_start)
+        frame_start=args.frame_start, textures=not args.no_textures)
 
 
 def _stage_progress():
@@ -515,7 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     ".npz bake)")
     p.set_defaults(func=cmd_bake, radial=8, rings=1, no_leaves=False, position_tolerance=0.002,
                    angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256,
-                   frame_start=None)
+                   frame_start=None, no_textures=False)
 
     p = sub.add_parser("export", help="export a bake to glTF, OBJ sequences, USD, previews",
                        description="Write a bake (.npz) as animated glTF 2.0 (.glb or "

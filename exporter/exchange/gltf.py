@@ -29,9 +29,11 @@ from .anim import Animation, ReduceOptions, animate, subtree_reach
 from ..names import joint_names
 from .axes import points_y_up, quats_y_up
 from .mesh import TreeMesh, object_mesh
+from .textures import Texture
 
 FLOAT, USHORT, UINT = 5126, 5123, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
 _IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -64,6 +66,13 @@ class _Buffer:
             acc["max"] = [_num(v) for v in flat.max(axis=0)]
         self.accessors.append(acc)
         return len(self.accessors) - 1
+
+    def raw(self, data: bytes) -> int:
+        """A buffer view of raw bytes (an embedded image); returns its index."""
+        self.views.append({"buffer": 0, "byteOffset": self.length, "byteLength": len(data)})
+        self.parts.append(data + b"\0" * (-len(data) % 4))
+        self.length += len(data) + (-len(data) % 4)
+        return len(self.views) - 1
 
     def times(self, seconds: np.ndarray) -> int:
         """A keyframe-time accessor (min/max set, as animation inputs need),
@@ -103,9 +112,14 @@ class GltfResult:
 
 class _Document:
     def __init__(self, name: str, extras: dict | None = None,
-                 scene_extras: dict | None = None) -> None:
+                 scene_extras: dict | None = None,
+                 textures: dict[str, Texture | None] | None = None) -> None:
         self.extras = extras or {}
         self.scene_extras = scene_extras or {}
+        self.texture_of = textures or {}  # material -> Texture (None: plain colour)
+        self.images: list[dict] = []
+        self.samplers_tex: list[dict] = []
+        self.textures: list[dict] = []
         self.buf = _Buffer()
         self.nodes: list[dict] = []
         self.meshes: list[dict] = []
@@ -123,11 +137,29 @@ class _Document:
             self.roots.append(len(self.nodes) - 1)
         return len(self.nodes) - 1
 
+    def texture(self, tex: Texture) -> int:
+        """Embed a PNG (image in the buffer, its sampler, the texture)."""
+        self.images.append({"name": tex.name.removesuffix(".png"), "mimeType": "image/png",
+                            "bufferView": self.buf.raw(tex.png)})
+        wrap = REPEAT if tex.repeat else CLAMP_TO_EDGE
+        self.samplers_tex.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
+                                  "wrapS": wrap, "wrapT": wrap})
+        self.textures.append({"sampler": len(self.samplers_tex) - 1,
+                              "source": len(self.images) - 1})
+        return len(self.textures) - 1
+
     def material(self, name: str, colour, double_sided: bool) -> int:
         if name not in self.material_ids:
-            mat = {"name": name, "pbrMetallicRoughness": {
-                "baseColorFactor": _floats([*colour, 1.0]), "metallicFactor": 0,
-                "roughnessFactor": 0.9}}
+            tex = self.texture_of.get(name)
+            pbr = {"baseColorFactor": _floats([*colour, 1.0]), "metallicFactor": 0,
+                   "roughnessFactor": 0.9}
+            if tex is not None:  # the colour is in the texture (sRGB), the factor is white
+                pbr["baseColorFactor"] = [1, 1, 1, 1]
+                pbr["baseColorTexture"] = {"index": self.texture(tex)}
+            mat = {"name": name, "pbrMetallicRoughness": pbr}
+            if tex is not None and tex.cutout:
+                mat["alphaMode"] = "MASK"
+                mat["alphaCutoff"] = 0.5
             if double_sided:
                 mat["doubleSided"] = True
             self.materials.append(mat)
@@ -186,6 +218,8 @@ class _Document:
             scene["extras"] = self.scene_extras
         doc = {"asset": asset, "scene": 0, "scenes": [scene],
                "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
+        if self.textures:
+            doc.update(textures=self.textures, images=self.images, samplers=self.samplers_tex)
         if self.skins:
             doc["skins"] = self.skins
         if self.channels:
@@ -312,7 +346,9 @@ def scene_animation(bake: Bake, trees: list[int], objects: bool,
 
 
 def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objects: bool,
-          opts: ReduceOptions, frame_start: int = 1) -> tuple[_Document, list[AnimationPart]]:
+          opts: ReduceOptions, frame_start: int = 1,
+          textures: dict[str, Texture | None] | None = None
+          ) -> tuple[_Document, list[AnimationPart]]:
     """The glTF document. Key times are (frame_start + frame index) / fps s
     (bake time + frame_start / fps), so an importer's frame = time x fps
     (Blender, three.js's AnimationUtils) is the bake's frame number."""
@@ -320,7 +356,8 @@ def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objec
     fps = bake.fps
     hint = {"frame_start": frame_start, "frame_end": frame_start + n - 1, "fps": fps}
     # the frame grid, so a reader (treebake diff) can sample reduced channels
-    doc = _Document(name, {"fps": fps, "frames": n, "frame_start": frame_start}, hint)
+    doc = _Document(name, {"fps": fps, "frames": n, "frame_start": frame_start}, hint,
+                    textures)
     parts = scene_animation(bake, trees, objects, opts)
     part_of = {i: p for p in parts for i in p.first}
     joint_node: dict[tuple[int, int], int] = {}  # (part, joint row) -> node
@@ -375,10 +412,12 @@ def write(path: str | Path, doc: _Document) -> list[Path]:
 
 def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                 binary: bool = True, split: bool = False,
-                opts: ReduceOptions | None = None, frame_start: int = 1) -> GltfResult:
+                opts: ReduceOptions | None = None, frame_start: int = 1,
+                textures: dict[str, Texture | None] | None = None) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
     `name.<tree>.glb`, and the projectiles in `name.objects.glb`. Bake
-    frame f (0-based) is keyed at (frame_start + f) / fps s."""
+    frame f (0-based) is keyed at (frame_start + f) / fps s. `textures`:
+    material name -> Texture to embed (textures.py); others stay plain."""
     out = Path(out)
     opts = opts or ReduceOptions()
     ext = ".glb" if binary else ".gltf"
@@ -392,7 +431,7 @@ def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
     result = GltfResult()
     reports = []
     for stem, trees, objects in jobs:
-        doc, parts = build(bake, stem, meshes, trees, objects, opts, frame_start)
+        doc, parts = build(bake, stem, meshes, trees, objects, opts, frame_start, textures)
         result.files += write(out / f"{stem}{ext}", doc)
         reports += [p.anim.report for p in parts]
     for i, m in enumerate(meshes):

@@ -33,13 +33,24 @@ def _safe(name: str) -> str:
     return "_".join(str(name).split()) or "unnamed"
 
 
-def mtl_text(materials: dict[str, tuple[float, float, float]]) -> str:
+def mtl_text(materials: dict[str, tuple[float, float, float]],
+             maps: dict[str, tuple[str, bool]] | None = None) -> str:
+    """The .mtl: per material its colour, or with `maps` (material ->
+    (relative PNG path, cutout)) its texture as map_Kd (Kd white, so readers
+    that multiply keep the texture's colour) and, for cutout cards, map_d
+    (the PNG's alpha)."""
+    maps = maps or {}
     out = [f"# treebake {__version__} materials"]
     for name, colour in materials.items():
-        r, g, b = colour
+        r, g, b = (1.0, 1.0, 1.0) if name in maps else colour
         out += ["", f"newmtl {name}", "Ka 0.000000 0.000000 0.000000",
                 f"Kd {r:.6f} {g:.6f} {b:.6f}", "Ks 0.000000 0.000000 0.000000",
                 "Ns 10.000000", "d 1.000000", "illum 1"]
+        if name in maps:
+            path, cutout = maps[name]
+            out.append(f"map_Kd {path}")
+            if cutout:
+                out.append(f"map_d {path}")
     return "\n".join(out) + "\n"
 
 
@@ -77,9 +88,11 @@ def frame_digits(frames: int) -> int:
 
 def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                stride: int = 1, progress: Callable[[int, int], None] | None = None,
-               frame_start: int = 1) -> ObjResult:
+               frame_start: int = 1, maps: dict[str, tuple[str, bool]] | None = None
+               ) -> ObjResult:
     """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th
-    frame, NNNN = frame_start + the bake's frame index."""
+    frame, NNNN = frame_start + the bake's frame index; `maps`: textures
+    for the .mtl (mtl_text)."""
     if stride < 1:
         raise ValueError("stride must be >= 1")
     out = Path(out)
@@ -101,7 +114,7 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             offset += mesh.n_vertices
     result = ObjResult()
     mtl = f"{name}.mtl"
-    result.files.append(write_bytes(out / mtl, mtl_text(materials).encode("ascii")))
+    result.files.append(write_bytes(out / mtl, mtl_text(materials, maps).encode("ascii")))
     frames = list(range(0, len(bake.times), stride))
     digits = frame_digits(frame_start + len(bake.times) - 1)
     for done, f in enumerate(frames):

@@ -60,7 +60,8 @@ def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
 
 
 class _Writer:
-    def __init__(self, bake: Bake, name: str, frame_start: int = 1) -> None:
+    def __init__(self, bake: Bake, name: str, frame_start: int = 1,
+                 maps: dict[str, tuple[str, bool]] | None = None) -> None:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
         self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
@@ -80,6 +81,7 @@ class _Writer:
         st.SetDefaultPrim(root.GetPrim())
         Usd.ModelAPI(root.GetPrim()).SetKind("assembly")
         self.materials: dict[str, object] = {}
+        self.maps = maps or {}  # material -> (texture path relative to the file, cutout)
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
 
     def ident(self, name: str) -> str:
@@ -100,13 +102,38 @@ class _Writer:
             mat = self.UsdShade.Material.Define(self.stage, path)
             sh = self.UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
             sh.CreateIdAttr("UsdPreviewSurface")
-            sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f).Set(
-                self.Gf.Vec3f(*[float(c) for c in colour]))
+            diffuse = sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f)
+            if name in self.maps:
+                self.texture(path, sh, diffuse, *self.maps[name])
+            else:
+                diffuse.Set(self.Gf.Vec3f(*[float(c) for c in colour]))
             sh.CreateInput("roughness", self.Sdf.ValueTypeNames.Float).Set(0.9)
             sh.CreateInput("metallic", self.Sdf.ValueTypeNames.Float).Set(0.0)
             mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
             self.materials[name] = mat
         return self.materials[name]
+
+    def texture(self, path: str, surface, diffuse, file: str, cutout: bool) -> None:
+        """diffuseColor (and for cutout cards opacity, thresholded at 0.5)
+        from a UsdUVTexture reading `file` at the mesh's `st` primvar."""
+        Sdf, UsdShade = self.Sdf, self.UsdShade
+        reader = UsdShade.Shader.Define(self.stage, f"{path}/stReader")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        tex = UsdShade.Shader.Define(self.stage, f"{path}/Texture")
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+        wrap = "clamp" if cutout else "repeat"
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+            reader.ConnectableAPI(), "result")
+        diffuse.ConnectToSource(tex.ConnectableAPI(), "rgb")
+        if cutout:
+            surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
+                tex.ConnectableAPI(), "a")
+            surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
 
     def meshes(self, parent: str, mesh: TreeMesh, skel_path: str | None,
                offset: np.ndarray | None = None) -> None:
@@ -246,10 +273,12 @@ def validate(path: str | Path) -> list[str]:
 def export_usd(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                ascii: bool = False, check: bool = True,
                progress: Callable[[int, int], None] | None = None,
-               frame_start: int = 1) -> UsdResult:
+               frame_start: int = 1,
+               maps: dict[str, tuple[str, bool]] | None = None) -> UsdResult:
     """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
-    frame f at time code frame_start + f."""
-    w = _Writer(bake, name, frame_start)
+    frame f at time code frame_start + f; `maps`: material -> (texture
+    path relative to the file, cutout) for the preview surfaces."""
+    w = _Writer(bake, name, frame_start, maps)
     result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
     for i, mesh in enumerate(meshes):
         result.joints += w.tree(i, mesh)
