@@ -2,9 +2,9 @@
 
     import treebake
     scene = treebake.load_scene("preset:felling", duration=4.0)
-    bake = treebake.bake(scene)
+    bake = treebake.bake_scene(scene)
     treebake.save_bake(bake, "out/felling/felling.npz")
-    treebake.export(bake, "out", formats=("glb", "usd"))
+    treebake.export_bake(bake, "out", formats=("glb", "usd"))
     again = treebake.load_bake("out/felling/felling.npz")
 
 Units are SI (m, s, kg; angles in degrees in scenes); see docs/scenes.md
@@ -31,15 +31,15 @@ def load_scene(source: str | Path, **overrides):
     return load_job(resolve(str(source)), overrides)
 
 
-def bake(scene, solver: str = "planar", workers: int = 1, progress=None):
+def bake_scene(scene, solver: str = "planar", workers: int = 1, progress=None):
     """Grow, rig and simulate `scene` (from `load_scene`); returns the
     `Bake` (per frame and segment: base position, m, and rotation). solver:
     "planar" (the fast LOD) or "full" (the MuJoCo reference, extra
     `treebake[reference]`); workers: processes (the result is the same for
     any number); progress(done, total) is called per frame."""
-    from .pipeline import bake_scene
+    from .pipeline import bake_scene as _bake
 
-    return bake_scene(scene, solver=solver, workers=workers, progress=progress)
+    return _bake(scene, solver=solver, workers=workers, progress=progress)
 
 
 def save_bake(bake, path: str | Path) -> Path:
@@ -56,17 +56,20 @@ def load_bake(path: str | Path):
     return _load(path)
 
 
-def export(bake, out: str | Path = "out", formats=("glb",), name: str | None = None,
-           textures: bool = True, **options):
+def export_bake(bake, out: str | Path = "out", formats=("glb",), name: str | None = None,
+                textures: bool = True, **options):
     """Write `bake` into `out/<name>/` (name: the scene's) in `formats`
     (any of glb, gltf, obj, usd, usda, preview; usd needs `treebake[usd]`),
     with manifest.json. `textures=False` writes plain colour materials.
     Other options are ExportOptions fields (split, obj_stride,
     preview_size). Returns the ExportReport (folder, manifest, files)."""
-    from .export import ExportOptions, export_bake, parse_formats
+    from .export import ExportOptions, parse_formats
+    from .export import export_bake as _export
 
     opts = ExportOptions(formats=parse_formats(formats), textures=textures, **options)
-    return export_bake(bake, out, name, opts)
+    return _export(bake, out, name, opts)
 
 
-__all__ = ["bake", "export", "load_bake", "load_scene", "save_bake"]
+# not `bake` / `export`: those are the names of submodules, and importing a
+# submodule rebinds the package attribute of the same name
+__all__ = ["bake_scene", "export_bake", "load_bake", "load_scene", "save_bake"]

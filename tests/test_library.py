@@ -63,13 +63,17 @@ def test_list_command(capsys):
 
 def test_public_api_from_another_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    import treebake.bake  # noqa: F401  (submodules must not shadow the API's names)
+    import treebake.export  # noqa: F401
+
+    assert callable(treebake.bake_scene) and callable(treebake.export_bake)
     scene = treebake.load_scene("sapling", duration=0.25, wind=9.0)
     assert scene.name == "sapling" and scene.wind.speed == 9.0
-    bake = treebake.bake(scene)
+    bake = treebake.bake_scene(scene)
     path = treebake.save_bake(bake, "out/s.npz")
     again = treebake.load_bake(path)
     assert len(again.times) == len(bake.times) == 7
-    report = treebake.export(again, "out", formats=("glb", "obj"), name="s")
+    report = treebake.export_bake(again, "out", formats=("glb", "obj"), name="s")
     assert (tmp_path / "out" / "s" / "s.glb").is_file() and report.manifest["files"]
     with pytest.raises(treebake.InputError, match="duration"):
         treebake.load_scene("preset:calm", duration=-1)
