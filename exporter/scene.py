@@ -59,7 +59,7 @@ class TreeSpec:
 @dataclass
 class WindSpec:
     speed: float  # m/s at reference height
-    direction: float = WIND["direction"].default  # degrees, the direction the wind blows toward, CCW from +X
+    direction: float = WIND["direction"].default  # degrees, blowing toward, CCW from +X
     reference_height: float = WIND["reference_height"].default  # m
     shear: float = WIND["shear"].default
     turbulence: float = WIND["turbulence"].default  # sigma_u / U
@@ -166,8 +166,8 @@ class Scene:
     cuts: list[CutSpec] = field(default_factory=list)
     pulls: list[PullSpec] = field(default_factory=list)
     camera: CameraSpec | None = TOP["camera"].default
-    formats: tuple[str, ...] = TOP["formats"].default  # exported by `treebake bake` unless --format says otherwise
-    frame_start: int = TOP["frame_start"].default  # the number of the first frame in every exported format
+    formats: tuple[str, ...] = TOP["formats"].default  # `treebake bake` exports (--format wins)
+    frame_start: int = TOP["frame_start"].default  # number of frame 0 in every exported format
 
     @property
     def frame_count(self) -> int:

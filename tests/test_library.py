@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-import treebake
+import treebake  # noqa: F401  (the package root: the public API)
 from treebake import library
 from treebake.cli import main
 from treebake.errors import InputError

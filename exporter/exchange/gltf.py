@@ -8,9 +8,10 @@ transform, the skin's `skeleton`) whose descendants are the joint nodes
 as names.py makes them, the segment path in `extras.segment_path`); a
 separate root node `<tree>_mesh` holds the mesh and the skin (glTF ignores
 a skinned mesh node's own transform, so it has none). Every node name is
-unique in the file and kept unchanged by three.js, Blender, Maya, Houdini. A joint's node transform is its
-frame-0 local transform; channels exist only where it changes. Static
-trees are plain meshes with no joints and no animation.
+unique in the file and kept unchanged by three.js, Blender, Maya, Houdini.
+A joint's node transform is its frame-0 local transform; channels exist
+only where it changes. Static trees are plain meshes with no joints and no
+animation. Key times: frame f at (frame_start + f) / fps s.
 """
 
 from __future__ import annotations

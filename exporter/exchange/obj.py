@@ -1,6 +1,7 @@
 """OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (file
 number = frame_start + bake frame index, zero-padded to 4 digits or more),
-one shared `name.mtl`. Frames only: extra sub-frame samples are not written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
+one shared `name.mtl`. Frames only: extra sub-frame samples are not
+written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
 
 Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
 `vn` (one of each per vertex, so faces are `f i/i/i j/j/j k/k/k`) and

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
-from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name
+from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
 from .symbols import AT_COMMANDS
 
 Module = tuple[str, tuple[float, ...]]
