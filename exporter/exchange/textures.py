@@ -224,6 +224,11 @@ def _card(kind: int) -> Image.Image:
     alpha = np.asarray(small)[..., 3]
     rgba = np.asarray(small).copy()
     rgba[..., 3] = np.where(alpha >= 128, 255, 0)  # a clean cutout mask
+    # transparent texels carry the leaves' mean colour, not black: mipmaps and
+    # filtering at the cutout's edge then blend toward green, not a dark fringe
+    solid = rgba[..., 3] > 0
+    mean = rgba[solid][:, :3].astype(np.int64).sum(axis=0) // max(int(solid.sum()), 1)
+    rgba[~solid, :3] = mean
     return Image.fromarray(rgba, "RGBA")
 
 
