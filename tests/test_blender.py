@@ -8,20 +8,21 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
+from conftest import need
 
 from treebake.export import ExportOptions, export_bake
 from treebake.names import joint_names
 
-pytest.importorskip("pxr", reason="USD export needs usd-core")
 
 
 def test_blender_frame_k_is_the_bakes_frame_k_for_glb_and_usd(tmp_path):
     import blender
+
+    need("pxr")  # the USD export
 
     bake = preset_bake("felling")  # the spruce falls fast at the end: frames differ a lot
     n = len(bake.times)

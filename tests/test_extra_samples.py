@@ -15,6 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
+from conftest import need
 from gltfread import Gltf, quat_to_matrix
 
 from treebake.bake import Bake, TreeBake, load_bake, save_bake
@@ -127,7 +128,7 @@ def test_gltf_keys_follow_the_sub_frame_motion(tmp_path):
 
 
 def test_usd_samples_the_sub_frames_at_fractional_time_codes(tmp_path):
-    pytest.importorskip("pxr", reason="usd-core is an optional dependency")
+    need("pxr")
     from pxr import Usd, UsdSkel
 
     bake = spinning_bake()

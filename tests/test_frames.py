@@ -14,6 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
+from conftest import need
 from gltfread import Gltf
 from validator import three_check
 
@@ -29,18 +30,11 @@ C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up
 def files(tmp_path_factory):
     bake = preset_bake("felling")  # falls fast at the end: frames differ by centimetres
     out = tmp_path_factory.mktemp("frames")
-    formats = ("glb", "obj", "usda") if _has_pxr() else ("glb", "obj")
+    need("pxr")
+    formats = ("glb", "obj", "usda")
     r1 = export_bake(bake, out, "one", ExportOptions(formats=formats))
     r101 = export_bake(bake, out, "late", ExportOptions(formats=formats, frame_start=101))
     return bake, r1, r101
-
-
-def _has_pxr() -> bool:
-    try:
-        import pxr  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 @pytest.mark.parametrize("start", [1, 101])
@@ -63,14 +57,13 @@ def test_every_format_numbers_frames_from_frame_start(files, start):
     names = sorted(p.name for p in (report.folder / "obj").glob("*.obj"))
     assert names[0] == f"{report.folder.name}.{start:04d}.obj" and len(names) == n
     assert names[-1] == f"{report.folder.name}.{start + n - 1:04d}.obj"
-    if _has_pxr():
-        from pxr import Usd, UsdSkel
+    from pxr import Usd, UsdSkel  # the fixture made sure pxr is there
 
-        stage = Usd.Stage.Open(str(report.folder / f"{report.folder.name}.usda"))
-        assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (start, start + n - 1)
-        skel = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
-        codes = UsdSkel.Animation(skel).GetRotationsAttr().GetTimeSamples()
-        assert codes == [float(start + f) for f in range(n)]
+    stage = Usd.Stage.Open(str(report.folder / f"{report.folder.name}.usda"))
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (start, start + n - 1)
+    skel = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    codes = UsdSkel.Animation(skel).GetRotationsAttr().GetTimeSamples()
+    assert codes == [float(start + f) for f in range(n)]
 
 
 def test_threejs_frame_k_is_the_bakes_frame_k(files):

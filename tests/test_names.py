@@ -12,6 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
+from conftest import need
 from validator import three_check
 
 from treebake.errors import SceneError
@@ -54,7 +55,7 @@ def test_joint_names_are_identifiers_unique_in_the_file():
 
 
 def test_usd_joints_carry_the_same_names_in_the_tree_hierarchy(tmp_path):
-    pytest.importorskip("pxr", reason="usd-core is an optional dependency")
+    need("pxr")
     from pxr import Usd, UsdSkel
 
     from treebake.exchange.usd import export_usd

@@ -15,6 +15,7 @@ from PIL import Image
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
+from conftest import need
 from gltfread import Gltf
 
 from treebake.cli import main
@@ -81,7 +82,7 @@ def test_glb_embeds_the_textures(demo):
 
 
 def test_obj_mtl_references_the_textures_trimesh_loads_them(demo):
-    trimesh = pytest.importorskip("trimesh")
+    trimesh = need("trimesh")
     _, tex, plain = demo
     mtl = (tex.folder / "obj" / "tex.mtl").read_text()
     assert "map_Kd textures/bark.png" in mtl and "map_d textures/leaf.png" in mtl
@@ -96,7 +97,7 @@ def test_obj_mtl_references_the_textures_trimesh_loads_them(demo):
 
 
 def test_usd_preview_surfaces_read_the_texture_files(demo):
-    pytest.importorskip("pxr", reason="usd-core is an optional dependency")
+    need("pxr")
     from pxr import Sdf, Usd, UsdShade
 
     _, tex, plain = demo
