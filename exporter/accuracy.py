@@ -32,13 +32,13 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import atomic_path, write_text
+from .library import grammars_folder
 from .pipeline import bake_scene, grow
 from .rotations import angle_between
 from .scene import Scene, parse_scene
 from .sim.quality import QUALITIES, Quality
 from .sway import segment_ends
 
-ROOT = Path(__file__).resolve().parent.parent
 TRUTH_STEP = 1 / 4000  # s
 
 SCENARIOS = {  # name: scene keys around one tree at the origin
@@ -99,7 +99,7 @@ def unbreakable(species: str, folder: Path) -> Path:
     """The species' grammar without breaking (no rupture, strength or
     anchor): a break is a branching event, after which two runs need not
     follow each other at all, so errors would measure chaos, not accuracy."""
-    src = (ROOT / SPECIES[species]).read_text().splitlines()
+    src = (grammars_folder().parent / SPECIES[species]).read_text().splitlines()
     keep = [ln for ln in src if not ln.split(":")[0].strip() in ("rupture", "strength", "anchor")]
     path = folder / f"{species}.lsys"
     path.write_text("\n".join(keep) + "\n")

@@ -36,6 +36,7 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import write_text
+from .library import grammar_path
 from .pipeline import bake_scene
 from .rotations import angle_between
 from .scene import parse_scene
@@ -46,7 +47,6 @@ GAP_TOLERANCE = 0.01  # joint gap, fraction of bone length
 REST_FRACTION = 1e-3  # "at rest": kinetic energy below this fraction of its peak
 
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
-SAPLING = Path(__file__).resolve().parent.parent / "grammars" / "sapling.lsys"
 
 
 @dataclass
@@ -77,7 +77,7 @@ class Result:
 
 
 def _sapling(extra: str = "", drop: tuple[str, ...] = ("rupture", "anchor")) -> str:
-    lines = [ln for ln in SAPLING.read_text().splitlines()
+    lines = [ln for ln in grammar_path("sapling").read_text().splitlines()
              if not any(ln.startswith(d + ":") for d in drop)]
     return "\n".join(lines) + "\n" + extra
 
