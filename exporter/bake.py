@@ -283,3 +283,7 @@ def _check_shapes(bake: Bake) -> None:
             raise ValueError(f"tree {t.name!r}: {len(t.paths)} paths for {s} segments")
         if s and (t.seg_start.max() >= len(t.points) or t.seg_end.max() >= len(t.points)):
             raise ValueError(f"tree {t.name!r}: a segment points past its {len(t.points)} points")
+        try:  # the extra sub-frame samples, when present, keep their contract too
+            t.check_extras(bake.times)
+        except InputError as exc:
+            raise ValueError(str(exc)) from None

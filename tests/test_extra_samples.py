@@ -99,6 +99,13 @@ def test_saved_and_loaded_byte_reproducibly_old_bakes_still_load(tmp_path):
     bad.trees[0].extra_times = bad.trees[0].extra_times[::-1].copy()
     with pytest.raises(InputError, match="extra_times must be sorted"):
         save_bake(bad, tmp_path / "c.npz")
+    # a saved bake whose extra samples were overwritten is a damaged file, not a bake
+    with np.load(tmp_path / "a.npz") as z:
+        arrays = dict(z)
+    arrays["tree0.extra_times"] = arrays["tree0.extra_times"][::-1].copy()
+    np.savez(tmp_path / "d.npz", **arrays)
+    with pytest.raises(InputError, match="damaged or truncated.*extra_times must be sorted"):
+        load_bake(tmp_path / "d.npz")
 
 
 def test_gltf_keys_follow_the_sub_frame_motion(tmp_path):
