@@ -77,3 +77,23 @@ def test_public_api_from_another_folder(tmp_path, monkeypatch):
     assert (tmp_path / "out" / "s" / "s.glb").is_file() and report.manifest["files"]
     with pytest.raises(treebake.InputError, match="duration"):
         treebake.load_scene("preset:calm", duration=-1)
+
+
+def test_the_wheel_lists_every_subpackage_and_bundled_file():
+    """setuptools installs only the packages pyproject.toml names (the
+    package-dir mapping rules out automatic discovery): a new subpackage
+    missing from the list works in the checkout and breaks the wheel."""
+    import fnmatch
+    import tomllib
+
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    found = {"treebake" + "".join("." + part for part in p.parent.relative_to(
+        ROOT / "exporter").parts) for p in (ROOT / "exporter").rglob("__init__.py")}
+    assert found | {"treebake.grammars", "treebake.presets"} == set(conf["packages"])
+    for package, folder, pattern in (("treebake.grammars", "grammars", "*.lsys"),
+                                     ("treebake.presets", "presets", "*.toml")):
+        globs = conf["package-data"][package]
+        for p in (ROOT / folder).rglob(pattern):
+            rel = p.relative_to(ROOT / folder).as_posix()
+            assert any(fnmatch.fnmatch(rel, g) and rel.count("/") == g.count("/")
+                       for g in globs), f"{rel} is not package data"
