@@ -38,12 +38,12 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import atomic_path, write_text
+from .library import grammars_folder
 from .pipeline import bake_scene, grow
 from .scene import Scene, parse_scene
 from .sim.quality import QUALITIES, Quality
 from .sway import segment_ends
 
-ROOT = Path(__file__).resolve().parent.parent
 TRUTH_STEP = 1 / 2000  # s (the reference converges: 1/480 s is within 0.002 % of it on a spruce)
 
 SCENARIOS = {  # name: scene keys around the case's trees
@@ -119,7 +119,7 @@ def unbreakable(species: str, folder: Path) -> Path:
     """The species' grammar without breaking (no rupture, strength or
     anchor): a break is a branching event, after which two runs need not
     follow each other at all, so errors would measure chaos, not accuracy."""
-    src = (ROOT / SPECIES[species]).read_text().splitlines()
+    src = (grammars_folder().parent / SPECIES[species]).read_text().splitlines()
     keep = [ln for ln in src if ln.split(":")[0].strip() not in ("rupture", "strength", "anchor")]
     if len(keep) == len(src):
         raise ValueError(f"{species}: no rupture, strength or anchor line to remove")

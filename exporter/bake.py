@@ -8,6 +8,13 @@ x y z w, float32). A vertex at rest position v on segment s is posed at
     position[f, s] + R(rotation[f, s]) (v - rest_base[s]).
 A tree that nothing moved has one frame. Projectiles are `objects`.
 
+Fast motion: a tree may also carry extra sub-frame samples (`extra_times`,
+s, strictly between frame times, sorted; `extra_positions`,
+`extra_rotations` with the same meaning as `positions`, `rotations`) where
+its segments turn fast (more than 45 degrees between frames). glTF and USD
+merge them into the animation keys; OBJ sequences, previews and `diff` use
+the frames alone. Empty (K = 0) by default.
+
 Saved as `.npz` written with fixed zip timestamps, so the same bake gives
 the same bytes.
 """
@@ -27,6 +34,7 @@ from .errors import InputError
 from .fileio import atomic_path
 
 FORMAT_VERSION = 1
+_EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
 
 
 @dataclass
@@ -47,6 +55,47 @@ class TreeBake:
     positions: np.ndarray  # (F, S, 3) float32, segment base
     rotations: np.ndarray  # (F, S, 4) float32, x y z w
     info: dict = field(default_factory=dict)  # grammar, hash, seed, events, ...
+    extra_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) s
+    extra_positions: np.ndarray | None = None  # (K, S, 3) float32; None -> (0, S, 3)
+    extra_rotations: np.ndarray | None = None  # (K, S, 4) float32, x y z w
+
+    def __post_init__(self):
+        S = self.seg_start.shape[0]
+        self.extra_times = np.asarray(self.extra_times, dtype=np.float64).reshape(-1)
+        K = len(self.extra_times)
+        self.extra_positions = np.asarray(
+            np.zeros((K, S, 3)) if self.extra_positions is None else self.extra_positions,
+            dtype=np.float32).reshape(K, S, 3)
+        self.extra_rotations = np.asarray(
+            np.zeros((K, S, 4)) if self.extra_rotations is None else self.extra_rotations,
+            dtype=np.float32).reshape(K, S, 4)
+
+    def samples(self, frame_times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every sample in time order: times (N,) s, positions (N, S, 3) and
+        rotations (N, S, 4), the frames merged with the extra samples, and
+        the index of each frame among them is `np.searchsorted(times,
+        frame_times)`. Static trees: their one frame."""
+        if self.static or not len(self.extra_times):
+            t = frame_times[:1] if self.static else frame_times
+            return np.asarray(t, np.float64), self.positions, self.rotations
+        times = np.concatenate([frame_times, self.extra_times])
+        order = np.argsort(times, kind="stable")
+        return (times[order], np.concatenate([self.positions, self.extra_positions])[order],
+                np.concatenate([self.rotations, self.extra_rotations])[order])
+
+    def check_extras(self, frame_times: np.ndarray) -> None:
+        """Raise InputError unless the extra samples fit the contract above."""
+        t = self.extra_times
+        if not len(t):
+            return
+        if self.static:
+            raise InputError(f"tree {self.name!r}: a static tree has no extra samples")
+        inside = np.searchsorted(frame_times, t)
+        between = (inside > 0) & (inside < len(frame_times))
+        between &= ~np.isin(t, frame_times)
+        if not (np.all(np.diff(t) > 0) and between.all() and np.isfinite(t).all()):
+            raise InputError(f"tree {self.name!r}: extra_times must be sorted and strictly "
+                             "between frame times")
 
     @property
     def n_segments(self) -> int:
@@ -145,6 +194,10 @@ def save_bake(bake: Bake, path: str | Path) -> Path:
                         "leaf", "leaf_size", "limb_parent", "limb_attach", "positions",
                         "rotations"):
                 _add(zf, p + key, getattr(t, key))
+            if len(t.extra_times):  # only when present: bakes without them keep their bytes
+                t.check_extras(bake.times)
+                for key in _EXTRAS:
+                    _add(zf, p + key, getattr(t, key))
             lengths = np.asarray([len(lp) for lp in t.limb_points], dtype=np.int64)
             flat = np.concatenate(t.limb_points) if t.limb_points else np.zeros(0, np.int64)
             _add(zf, p + "limb_point_counts", lengths)
@@ -196,7 +249,8 @@ def load_bake(path: str | Path) -> Bake:
                     **{k: z[pre + k] for k in ("points", "seg_start", "seg_end", "seg_parent",
                                                 "seg_limb", "width", "leaf", "leaf_size",
                                                 "limb_parent", "limb_attach", "positions",
-                                                "rotations")}))
+                                                "rotations")},
+                    **{k: z[pre + k] for k in _EXTRAS if pre + k in z}))
             objects = None
             if "objects.info" in z:
                 objects = ObjectsBake(_json(z["objects.info"])["shapes"], z["objects.sizes"],
@@ -229,3 +283,7 @@ def _check_shapes(bake: Bake) -> None:
             raise ValueError(f"tree {t.name!r}: {len(t.paths)} paths for {s} segments")
         if s and (t.seg_start.max() >= len(t.points) or t.seg_end.max() >= len(t.points)):
             raise ValueError(f"tree {t.name!r}: a segment points past its {len(t.points)} points")
+        try:  # the extra sub-frame samples, when present, keep their contract too
+            t.check_extras(bake.times)
+        except InputError as exc:
+            raise ValueError(str(exc)) from None

@@ -12,10 +12,12 @@ from pathlib import Path
 from . import __version__
 from .errors import InputError, LimitError, TreebakeError
 from .fileio import check_writable, check_writable_file, write_text
+from .library import resolve
 
 
 def _add_grammar_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("grammar", help="grammar file (.lsys)")
+    p.add_argument("grammar", help="grammar file (.lsys) or bundled grammar name (oak, "
+                                   "forest/birch; `treebake list`)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
     p.add_argument("--iterations", "-n", type=int, default=None,
                    help="derivation steps (default: grammar's)")
@@ -51,7 +53,7 @@ def cmd_derive(args) -> int:
 
     if args.output:
         check_writable_file(args.output)
-    grammar = load_grammar(args.grammar)
+    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
     d = _derive(grammar, args)
     text = format_modules(d.modules)
     if args.output:
@@ -99,7 +101,7 @@ def cmd_inspect(args) -> int:
 
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
-    grammar = load_grammar(args.grammar)
+    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
     out = check_writable(Path(args.out) / grammar.name)
     d = _derive(grammar, args)
     model = interpret(d.modules, grammar, seed=d.seed)
@@ -123,27 +125,20 @@ def load_job(path: str, args):
     """A scene file, or a grammar baked alone in a default scene (a gusty
     moderate breeze unless --wind says otherwise). Command-line overrides
     are validated like the file's own keys."""
-    from .scene import load_scene, parse_scene
+    from .scene import load_job as load
 
-    p = Path(path)
-    if p.suffix.lower() == ".npz":
-        raise InputError(f"{p} is a bake, not a scene: `treebake bake` takes a scene (.toml) or "
-                         f"a grammar (.lsys); to turn a bake into files use `treebake export {p}`"
-                         f" (or `treebake preview {p}`)")
+    if Path(path).suffix.lower() == ".npz":
+        raise InputError(f"{path} is a bake, not a scene: `treebake bake` takes a scene (.toml) "
+                         f"or a grammar (.lsys); to turn a bake into files use `treebake export "
+                         f"{path}` (or `treebake preview {path}`)")
+    p = resolve(path)  # a file, or a bundled grammar or preset by name
     if p.suffix.lower() not in (".toml", ".lsys"):
-        raise InputError(f"{p}: `treebake bake` takes a scene file (.toml) or a grammar "
-                         "(.lsys)")
+        raise InputError(f"{p}: `treebake bake` takes a scene file (.toml), a grammar (.lsys) "
+                         "or a bundled name (oak, preset:felling; `treebake list`)")
     overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
                                    ("seed", args.seed), ("quality", args.quality),
                                    ("wind.speed", args.wind)) if v is not None}
-    if p.suffix != ".lsys":
-        return load_scene(p, overrides)
-    if not p.is_file():
-        raise InputError(f"{p}: grammar file not found")
-    raw = {"name": p.stem, "tree": [{"grammar": str(p.resolve())}],
-           "wind": {"speed": overrides.pop("wind.speed", 6.7), "turbulence": 0.25}}
-    raw.update(overrides)
-    return parse_scene(raw, file=str(p))
+    return load(p, overrides)
 
 
 def _parse_timestep(text: str) -> float:
@@ -267,6 +262,8 @@ def _add_export_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("export options")
     g.add_argument("--split", action="store_true", help="glTF: one file per tree")
     g.add_argument("--no-leaves", action="store_true", help="no leaf quads")
+    g.add_argument("--no-textures", action="store_true",
+                   help="plain colour materials instead of the generated bark and leaf textures")
     g.add_argument("--radial", type=int, default=8,
                    help="vertices around a bark ring, 3-64 (default 8)")
     g.add_argument("--rings", type=int, default=1, help="bark rings per segment, 1-16 (default 1)")
@@ -279,6 +276,9 @@ def _add_export_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--stride", type=int, default=1,
                    help="OBJ sequences: every n-th frame (default 1)")
     g.add_argument("--size", type=int, default=256, help="preview panel size, px (default 256)")
+    g.add_argument("--frame-start", type=int, default=None,
+                   help="number of the first frame in every format (default: the scene's "
+                        "frame_start, 1)")
 
 
 def _export_options(args, allow_none: bool = False):
@@ -302,7 +302,8 @@ def _export_options(args, allow_none: bool = False):
         reduce=ReduceOptions(position_tolerance=args.position_tolerance,
                              angle_tolerance=math.radians(args.angle_tolerance),
                              enabled=not args.no_reduce),
-        split=args.split, obj_stride=args.stride, preview_size=args.size)
+        split=args.split, obj_stride=args.stride, preview_size=args.size,
+        frame_start=args.frame_start, textures=not args.no_textures)
 
 
 def _stage_progress():
@@ -505,7 +506,8 @@ class _batch_display:
 def cmd_sway(args) -> int:
     from .sway import pull_release
 
-    r = pull_release(args.grammar, seed=args.seed, quality=args.quality)
+    r = pull_release(resolve(args.grammar, ("grammar",)), seed=args.seed,
+                     quality=args.quality)
     data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
             "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
             "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),
@@ -517,6 +519,27 @@ def cmd_sway(args) -> int:
               f"{r.force:.0f} N to {r.deflection:.3f} m and released: first sway "
               f"{r.frequency:.3f} Hz (rig estimate {r.rayleigh_frequency:.3f} Hz), damping "
               f"ratio {r.damping:.3f}")
+    return 0
+
+
+def cmd_list(args) -> int:
+    from . import library
+
+    entries = [*library.grammars(), *library.presets()]
+    entries = [e for e in entries if args.kind in (None, e.kind + "s")]
+    if args.json:
+        print(json.dumps([{"kind": e.kind, "name": e.name, "path": str(e.path),
+                           "description": e.description} for e in entries]))
+        return 0
+    for kind, how in (("grammar", "treebake bake NAME"), ("preset", "treebake bake preset:NAME")):
+        group = [e for e in entries if e.kind == kind]
+        if group:
+            print(f"{kind}s ({how}):")
+            width = max(len(e.name) for e in group)
+            for e in group:
+                text = e.description if len(e.description) <= 72 else \
+                    e.description[:71].rstrip() + "…"
+                print(f"  {e.name:<{width}}  {text}")
     return 0
 
 
@@ -592,7 +615,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Grow, rig and simulate the trees of a scene file (TOML, "
                                    "docs/scenes.md), or one grammar in a gusty breeze, and "
                                    "write the bake (.npz, docs/formats.md) into OUT/<name>/.")
-    p.add_argument("job", help="scene file (.toml) or grammar (.lsys)")
+    p.add_argument("job", help="scene file (.toml), grammar (.lsys), a bundled grammar's name "
+                               "(oak) or preset:NAME (preset:felling); `treebake list`")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--name", help="job name: the output subfolder (default: the scene's name)")
     p.add_argument("--solver", choices=("planar", "full"), default="planar",
@@ -618,7 +642,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "preview (default: the scene's `formats`, else only the "
                                     ".npz bake)")
     p.set_defaults(func=cmd_bake, radial=8, rings=1, no_leaves=False, position_tolerance=0.002,
-                   angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256)
+                   angle_tolerance=0.25, no_reduce=False, split=False, stride=1, size=256,
+                   frame_start=None, no_textures=False)
 
     p = sub.add_parser("export", help="export a bake to glTF, OBJ sequences, USD, previews",
                        description="Write a bake (.npz) as animated glTF 2.0 (.glb or "
@@ -687,12 +712,20 @@ def build_parser() -> argparse.ArgumentParser:
                                    "moves 1 % of the height, release it in still air, and "
                                    "measure the first sway frequency and damping ratio (the "
                                    "field method).")
-    p.add_argument("grammar", help="grammar file (.lsys)")
+    p.add_argument("grammar", help="grammar file (.lsys) or bundled grammar name (oak)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: grammar's)")
     p.add_argument("--quality", choices=("draft", "default", "final"), default="default",
                    help="simulation quality level (default: default)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_sway)
+
+    p = sub.add_parser("list", help="the bundled grammars and scene presets",
+                       description="List the species grammars and scene presets that ship with "
+                                   "treebake, by the names the commands accept: `treebake bake "
+                                   "oak`, `treebake bake preset:felling`.")
+    p.add_argument("kind", nargs="?", choices=("grammars", "presets"), help="only these")
+    p.add_argument("--json", action="store_true", help="as JSON (with each file's path)")
+    p.set_defaults(func=cmd_list)
 
     p = sub.add_parser("accuracy", help="error against run time: the LOD vs the full reference",
                        description="Bake species x scenarios with the full 3D reference at a "
@@ -746,15 +779,17 @@ STABILITY_CASES = ("stiff x1", "stiff x100", "stiff x10000", "mass 1:10^2", "mas
                    "blast 50 kg at 5 m", "blast 500 kg at 6 m", "10 min gusty", "10 min calm")
 
 EXAMPLES = {
-    "derive": "  treebake derive grammars/sapling.lsys --stats-only\n"
-              "  treebake derive grammars/oak.lsys -n 4 -o oak.txt\n",
-    "inspect": "  treebake inspect grammars/oak.lsys            # out/oak/summary.json, "
-               "preview.png\n  treebake inspect grammars/palm.lsys --json --size 256\n",
-    "bake": "  treebake bake presets/demo.toml --format glb   # out/demo/demo.npz, demo.glb\n"
-            "  treebake bake grammars/sapling.lsys --duration 4 --wind 12 --quality draft\n"
-            "  treebake bake presets/gale.toml --solver full --timestep 1/480 --name gale-ref\n",
+    "derive": "  treebake derive sapling --stats-only              # a bundled grammar by name\n"
+              "  treebake derive grammars/oak.lsys -n 4 -o oak.txt  # or a grammar file\n",
+    "inspect": "  treebake inspect oak            # out/oak/summary.json, preview.png\n"
+               "  treebake inspect forest/birch --json --size 256\n",
+    "bake": "  treebake bake preset:demo --format glb   # out/demo/demo.npz, demo.glb\n"
+            "  treebake bake sapling --duration 4 --wind 12 --quality draft\n"
+            "  treebake bake presets/gale.toml --solver full --timestep 1/480 --name gale-ref\n"
+            "  treebake bake preset:felling --format glb,usd\n",
     "export": "  treebake export out/demo/demo.npz --format glb,usd\n"
-              "  treebake export out/demo/demo.npz --format obj --stride 2 --name demo-obj\n",
+              "  treebake export out/demo/demo.npz --format obj --stride 2 --name demo-obj\n"
+              "  treebake export out/demo/demo.npz --format glb --no-textures --frame-start 0\n",
     "preview": "  treebake preview out/demo/demo.npz --size 384\n",
     "diff": "  treebake diff out/before/oak/oak.npz out/after/oak/oak.npz\n"
             "  treebake diff out/demo/demo.glb out/demo/demo.npz   # an export vs its bake\n"
@@ -762,8 +797,10 @@ EXAMPLES = {
     "batch": "  treebake batch jobs.toml --out out/shots -j 2\n"
              "  treebake batch jobs.toml --out /shared/bakes --executor dask "
              "--scheduler tcp://head:8786\n",
-    "sway": "  treebake sway grammars/oak.lsys\n"
+    "sway": "  treebake sway oak\n"
             "  treebake sway grammars/spruce.lsys --quality final --json\n",
+    "list": "  treebake list                  # bundled grammars and presets, by name\n"
+            "  treebake list presets --json   # with each file's path\n",
     "accuracy": "  treebake accuracy --species sapling --scenarios breeze gale --duration 2\n",
     "stability": "  treebake stability --quick --solver planar\n"
                  "  treebake stability --case 'stiff x100' 'wind 70 m/s'\n",

@@ -18,9 +18,10 @@ from .bake import Bake
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
-from .fileio import atomic_path, write_text
+from .fileio import atomic_path, write_bytes, write_text
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "preview")
+MAX_FRAME_START = 1_000_000
 ALIASES = {"npz": None}  # the bake itself: always written by `treebake bake`
 
 Progress = Callable[[str, int, int], None]  # (stage, done, total)
@@ -30,7 +31,9 @@ Progress = Callable[[str, int, int], None]  # (stage, done, total)
 class ExportOptions:
     """formats: any of FORMATS; split: one glTF file per tree;
     obj_stride: write every n-th frame of OBJ sequences; preview_size: px
-    per view panel."""
+    per view panel; frame_start: the number of the bake's first frame in
+    every format (None: the bake's, from its scene; default 1); textures:
+    generated bark and leaf-card textures (False: plain colours)."""
 
     formats: tuple[str, ...] = ("glb",)
     mesh: MeshOptions = field(default_factory=MeshOptions)
@@ -38,6 +41,8 @@ class ExportOptions:
     split: bool = False
     obj_stride: int = 1
     preview_size: int = 256
+    frame_start: int | None = None
+    textures: bool = True
 
 
 @dataclass
@@ -80,6 +85,9 @@ def check_options(opts: ExportOptions) -> None:
                          f"{math.degrees(r.angle_tolerance)}")
     if not 64 <= opts.preview_size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {opts.preview_size}")
+    if opts.frame_start is not None and not 0 <= opts.frame_start <= MAX_FRAME_START:
+        raise InputError(f"--frame-start must be in 0..{MAX_FRAME_START}, got "
+                         f"{opts.frame_start}")
 
 
 def sha256(path: Path) -> str:
@@ -113,6 +121,11 @@ def _inputs(bake: Bake, bake_path: Path | None) -> dict:
     return out
 
 
+def frame_start(bake: Bake, opts: ExportOptions) -> int:
+    """The number the bake's first frame gets in the files."""
+    return int(bake.meta.get("frame_start", 1)) if opts.frame_start is None else opts.frame_start
+
+
 def _settings(opts: ExportOptions) -> dict:
     m, r = opts.mesh, opts.reduce
     return {"formats": list(opts.formats), "radial": m.radial, "rings_per_segment": m.rings,
@@ -120,6 +133,7 @@ def _settings(opts: ExportOptions) -> dict:
             "keyframe_reduction": r.enabled, "position_tolerance_m": r.position_tolerance,
             "angle_tolerance_deg": round(math.degrees(r.angle_tolerance), 9),
             "split": opts.split, "obj_stride": opts.obj_stride,
+            "frame_start": opts.frame_start, "textures": opts.textures,
             "preview_size_px": opts.preview_size, "up_axis": "Y", "units": "m"}
 
 
@@ -133,6 +147,16 @@ def _rounded(report: dict) -> dict:
     if out.get("keys_full"):
         out["keys_kept_fraction"] = round(out["keys_written"] / out["keys_full"], 4)
     return out
+
+
+def _textures(meshes: list[TreeMesh], opts: ExportOptions) -> dict:
+    """Material name -> its generated Texture (None: a plain colour)."""
+    if not opts.textures:
+        return {}
+    from .exchange.textures import texture_for
+
+    names = sorted({p.material for m in meshes for p in m.parts})
+    return {n: texture_for(n) for n in names}
 
 
 def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
@@ -157,8 +181,11 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     manifest: dict = {"tool": f"treebake {__version__}", "job": name,
                       "inputs": _inputs(bake, bake_path), "settings": _settings(opts)}
     n = len(bake.times)
-    manifest["frames"] = {"count": n, "fps": bake.fps, "first": 1, "last": n,
-                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1])}
+    first = frame_start(bake, opts)
+    manifest["frames"] = {"count": n, "fps": bake.fps, "first": first, "last": first + n - 1,
+                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1]),
+                          "gltf_start_s": first / bake.fps,
+                          "extra_samples": sum(len(t.extra_times) for t in bake.trees)}
     manifest["sizes"] = {
         "trees": len(bake.trees), "animated_trees": sum(not t.static for t in bake.trees),
         "segments": sum(t.n_segments for t in bake.trees),
@@ -168,13 +195,21 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         "leaf_quads": sum(2 * int((t.leaf > 0).sum()) for t in bake.trees)
         if opts.mesh.leaves else 0,
         "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
+    textures = _textures(meshes, opts)
+    maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
+    # PNGs beside the files that reference them (obj/textures/, textures/): a
+    # reader need not follow paths out of its file's folder (trimesh refuses)
+    pngs = {t.name: t.png for t in textures.values() if t is not None}
+    for sub, fmts in (("obj", ("obj",)), ("", ("usd", "usda"))):
+        if any(f in opts.formats for f in fmts):
+            files += [write_bytes(folder / sub / "textures" / n, png) for n, png in pngs.items()]
     for fmt in ("glb", "gltf"):
         if fmt in opts.formats:
             from .exchange.gltf import export_gltf
 
             tick(fmt, 0, 1)
             res = export_gltf(bake, meshes, folder, name, binary=fmt == "glb", split=opts.split,
-                              opts=opts.reduce)
+                              opts=opts.reduce, frame_start=first, textures=textures)
             files += res.files
             manifest["animation"] = _rounded(res.animation)
             manifest["animation"]["tolerances"] = {
@@ -185,16 +220,19 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         from .exchange.obj import export_obj
 
         res = export_obj(bake, meshes, folder / "obj", name, opts.obj_stride,
-                         progress=lambda d, t: tick("obj", d, t))
+                         progress=lambda d, t: tick("obj", d, t), frame_start=first,
+                         maps=maps)
         files += res.files
         manifest["frames"]["obj"] = {"stride": opts.obj_stride, "files": len(res.frames),
-                                     "first": res.frames[0] + 1, "last": res.frames[-1] + 1}
+                                     "first": res.frames[0] + first,
+                                     "last": res.frames[-1] + first}
     for fmt in ("usd", "usda"):
         if fmt in opts.formats:
             from .exchange.usd import export_usd
 
             res = export_usd(bake, meshes, folder, name, ascii=fmt == "usda",
-                             progress=lambda d, t, f=fmt: tick(f, d, t))
+                             progress=lambda d, t, f=fmt: tick(f, d, t), frame_start=first,
+                             maps=maps)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))
@@ -216,7 +254,6 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
 def write_previews(bake: Bake, folder: Path, name: str, size: int = 256,
                    progress: Callable[[int, int], None] | None = None) -> list[Path]:
     """`name.contact.png` (12 frames) and `name.gif` (the whole bake)."""
-    from .fileio import write_bytes
     from .preview import animated_gif, contact_sheet
 
     sheet = contact_sheet(bake, size=size)

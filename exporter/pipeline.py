@@ -181,6 +181,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         "fps": scene.fps, "duration": scene.duration, "seed": scene.seed, "solver": solver,
         "quality": asdict(q), "prestress": scene.prestress, "gravity": scene.gravity,
         "culling": culled,  # trees removed or coarsened by each rule
+        "frame_start": scene.frame_start,  # the exporters' number of frame 0
     }
     timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
     motions: dict[str, TreeMotion] = {}

@@ -44,6 +44,7 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import write_text
+from .library import grammar_path
 from .pipeline import bake_scene
 from .rotations import angle_between
 from .scene import parse_scene
@@ -57,7 +58,6 @@ RISE_TOLERANCE = 0.05  # m: the centre of mass after a cut may not rise more
 REST_FRACTION = 1e-3  # "at rest": kinetic energy below this fraction of its peak
 
 WOOD = "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
-GRAMMARS = Path(__file__).resolve().parent.parent / "grammars"
 LEVELS = ("draft", "default", "final")  # the planar LOD's quality levels
 
 
@@ -93,7 +93,7 @@ class Result:
 
 
 def _sapling(extra: str = "", drop: tuple[str, ...] = ("rupture", "anchor")) -> str:
-    lines = [ln for ln in (GRAMMARS / "sapling.lsys").read_text().splitlines()
+    lines = [ln for ln in grammar_path("sapling").read_text().splitlines()
              if not any(ln.startswith(d + ":") for d in drop)]
     return "\n".join(lines) + "\n" + extra
 
@@ -263,7 +263,7 @@ def run(case: Case, solver: str, level: str = "default") -> Result:
 
         with TemporaryDirectory() as tmp:
             if case.grammar.startswith("species:"):
-                path = GRAMMARS / f"{case.grammar.split(':', 1)[1]}.lsys"
+                path = grammar_path(case.grammar.split(":", 1)[1])
             else:
                 path = Path(tmp) / "g.lsys"
                 path.write_text(case.grammar)

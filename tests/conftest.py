@@ -39,3 +39,17 @@ def pytest_make_collect_report(collector):
     report = outcome.get_result()
     if REQUIRE_TOOLS and report.skipped:
         _fail_skip(report)
+
+
+def need(module: str):
+    """Import an optional test dependency (usd-core's `pxr`, trimesh): skip
+    without it, except under TREEBAKE_REQUIRE_TOOLS=1 (CI), where a missing
+    one fails, so a skipped check never passes for a run one."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        if REQUIRE_TOOLS:
+            pytest.fail(f"{module} is needed (TREEBAKE_REQUIRE_TOOLS=1)")
+        pytest.skip(f"{module} is an optional dependency")

@@ -161,6 +161,38 @@ def test_a_glb_and_its_own_bake_are_the_same_within_the_declared_reduction(sapli
     assert not moved.within and moved.worst[0].segment == tip
 
 
+def test_a_glb_at_another_frame_start_with_tool_safe_names_diffs_like_its_bake(
+        sapling_export, tmp_path):
+    """Both branches' glTF additions together: keys at (frame_start + f) / fps,
+    joints named <tree>_<path>_s<k> with the path in extras.segment_path, and
+    terminal joints' tips in extras.tip; the reader undoes all three."""
+    from treebake.diff import load_any
+    from treebake.exchange.anim import ReduceOptions
+    from treebake.exchange.gltf_read import _load
+    from treebake.export import ExportOptions, export_bake
+
+    bake, npz, glb, full = sapling_export
+    late = export_bake(bake, tmp_path, "late",
+                       ExportOptions(reduce=ReduceOptions(enabled=False), frame_start=1001),
+                       bake_path=npz).folder / "late.glb"
+    doc, _ = _load(late)
+    info = doc["asset"]["extras"]["treebake"]
+    assert info["frame_start"] == 1001 and info["reduction"] == {"position_m": 0.0,
+                                                                "angle_deg": 0.0}
+    tree = bake.trees[0]
+    joints = doc["skins"][0]["joints"]
+    extras = [doc["nodes"][j]["extras"] for j in joints]
+    assert [e["segment_path"] for e in extras] == list(tree.paths)
+    assert all(":" not in doc["nodes"][j]["name"] for j in joints)
+    terminal = ~np.isin(np.arange(tree.n_segments), tree.seg_parent)
+    assert [("tip" in e) for e in extras] == terminal.tolist()
+    back = load_any(late)
+    assert back.trees[0].paths == list(tree.paths) and "tipless" not in back.trees[0].info
+    exact = diff_bakes(back, bake)
+    assert exact.max_position < 2e-5 and exact.max_angle < 1e-2 and exact.allowance_note == ""
+    assert diff_bakes(back, load_any(full)).max_position < 2e-5
+
+
 def _rotation_keys_offset(glb: bytes) -> int:
     """Byte offset in the file of the middle of the first rotation channel's values."""
     import json

@@ -17,6 +17,7 @@ from validator import validate
 from treebake.exchange.anim import ReduceOptions
 from treebake.exchange.gltf import export_gltf
 from treebake.exchange.mesh import MeshOptions, tree_mesh
+from treebake.names import joint_names
 
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up
 
@@ -44,7 +45,7 @@ def test_khronos_validator_passes_gltf_bin_and_split_files(tmp_path):
     assert [f.suffix for f in files] == [".gltf", ".bin"]
     files += _export(bake, tmp_path / "split", split=True).files
     assert {f.name for f in files if "split" in str(f)} == {
-        "job.tree0.glb", "job.tree1.glb", "job.objects.glb"}
+        "job.sapling.glb", "job.oak.glb", "job.objects.glb"}
     reports = validate([f for f in files if f.suffix in (".glb", ".gltf")])
     assert len(reports) == 4
     for report in reports:
@@ -61,10 +62,11 @@ def _float32_tol(bake) -> float:
 def _joint_errors(bake, g: Gltf, tree, frames):
     skin = next(s for s in g.g.skins if s.name == tree.name)
     names = [g.g.nodes[j].name for j in skin.joints]
-    assert names == tree.paths  # one joint per segment, named by its path
+    assert names == joint_names(tree.name, tree.paths)  # one joint per segment
+    assert [g.g.nodes[j].extras["segment_path"] for j in skin.joints] == tree.paths
     worst_p = worst_a = 0.0
     for f in frames:
-        w = g.worlds(skin.joints, float(np.float32(bake.times[f])))
+        w = g.worlds(skin.joints, float(np.float32(bake.times[f] + 1 / bake.fps)))
         p = tree.positions[f].astype(np.float64) @ C.T
         worst_p = max(worst_p, float(np.linalg.norm(w[:, :3, 3] - p, axis=1).max()))
         for s in range(tree.n_segments):
@@ -109,7 +111,7 @@ def test_projectiles_are_animated_nodes(tmp_path):
     for k in range(len(o.sizes)):
         node = g.node_index(f"projectile_{k}")
         for f in range(0, len(bake.times), 5):
-            w = g.world(node, float(np.float32(bake.times[f])))
+            w = g.world(node, float(np.float32(bake.times[f] + 1 / bake.fps)))
             np.testing.assert_allclose(w[:3, 3], C @ o.positions[f, k], atol=_float32_tol(bake))
             np.testing.assert_allclose(w[:3, :3], C @ quat_to_matrix(o.rotations[f, k]) @ C.T,
                                        atol=2e-6)

@@ -49,7 +49,8 @@ def _compare(bake, obj, g, frames, tol):
         for tree in bake.trees:
             if tree.static:
                 continue
-            skinned = g.skinned(g.node_index(f"{tree.name}.mesh"), float(np.float32(bake.times[f])))
+            t = float(np.float32(bake.times[f] + 1 / bake.fps))  # frame_start 1
+            skinned = g.skinned(g.node_index(f"{tree.name}_mesh"), t)
             worst = max(worst, float(np.abs(blocks[tree.name] - skinned).max()))
     assert worst < tol, worst
     return worst

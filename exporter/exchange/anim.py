@@ -131,22 +131,25 @@ def forward(parent: np.ndarray, levels: list[np.ndarray], t_loc: np.ndarray,
 # reduction
 
 
-def _spans(keep: np.ndarray):
-    """For every frame: the kept keys around it and the fraction between."""
+def _spans(keep: np.ndarray, times: np.ndarray | None = None):
+    """For every sample: the kept keys around it and the fraction between
+    (by time: `times` (F,) s, default evenly spaced)."""
     F = keep.shape[1]
     idx = np.arange(F)
     prev = np.maximum.accumulate(np.where(keep, idx, -1), axis=1)
     nxt = np.minimum.accumulate(np.where(keep, idx, F)[:, ::-1], axis=1)[:, ::-1]
     nxt = np.where(nxt >= F, prev, nxt)  # after the last key: hold it
-    span = nxt - prev
-    t = np.where(span > 0, (idx - prev) / np.where(span > 0, span, 1), 0.0)
+    at = idx.astype(np.float64) if times is None else np.asarray(times, np.float64)
+    span = at[nxt] - at[prev]
+    t = np.where(span > 0, (at - at[prev]) / np.where(span > 0, span, 1), 0.0)
     return prev, nxt, t
 
 
-def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
-    """Every frame (C, F, D) rebuilt from the kept keys as glTF's LINEAR
+def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool,
+                 times: np.ndarray | None = None) -> np.ndarray:
+    """Every sample (C, F, D) rebuilt from the kept keys as glTF's LINEAR
     interpolation does it (slerp for rotations)."""
-    prev, nxt, t = _spans(keep)
+    prev, nxt, t = _spans(keep, times)
     va = np.take_along_axis(values, prev[..., None], axis=1)
     vb = np.take_along_axis(values, nxt[..., None], axis=1)
     if not rotation:
@@ -154,11 +157,12 @@ def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.nda
     return slerp(va, vb, t)
 
 
-def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
-    """(C, F) interpolation error at every frame. Rotations: an upper bound
+def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool,
+            times: np.ndarray | None = None) -> np.ndarray:
+    """(C, F) interpolation error at every sample. Rotations: an upper bound
     of both slerp's and component-wise (nlerp) interpolation's angle error:
     nlerp's error plus the angle between nlerp and slerp."""
-    prev, nxt, t = _spans(keep)
+    prev, nxt, t = _spans(keep, times)
     va = np.take_along_axis(values, prev[..., None], axis=1)
     vb = np.take_along_axis(values, nxt[..., None], axis=1)
     if not rotation:
@@ -170,18 +174,24 @@ def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool) -> np.ndarray:
     return angle_between(qnormalize(va + (vb - va) * t[..., None]), values) + gap
 
 
-def _midpoint_errors(values: np.ndarray, rotation: bool) -> np.ndarray:
-    """(C, F-2) error of predicting each inner frame from its two neighbours."""
+def _midpoint_errors(values: np.ndarray, rotation: bool,
+                     times: np.ndarray | None = None) -> np.ndarray:
+    """(C, F-2) error of predicting each inner sample from its two neighbours
+    (a first guess at the keys; `_errors` has the last word)."""
     a, b, v = values[:, :-2], values[:, 2:], values[:, 1:-1]
+    w = np.full(values.shape[1] - 2, 0.5)
+    if times is not None:
+        w = (times[1:-1] - times[:-2]) / (times[2:] - times[:-2])
     if not rotation:
-        return np.linalg.norm(0.5 * (a + b) - v, axis=-1)
-    half = np.full(a.shape[:2], 0.5)
-    return angle_between(slerp(a, b, half), v)  # at t = 1/2 slerp and nlerp agree
+        return np.linalg.norm(a + (b - a) * w[None, :, None] - v, axis=-1)
+    return angle_between(slerp(a, b, np.broadcast_to(w, a.shape[:2])), v)
 
 
-def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
-    """(C, F) bool: the frames to keep so that interpolation reproduces every
-    frame of every channel within tol (C,)."""
+def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
+                times: np.ndarray | None = None) -> np.ndarray:
+    """(C, F) bool: the samples to keep so that interpolation reproduces every
+    sample of every channel within tol (C,); `times` (F,) s when the
+    samples are not evenly spaced."""
     C, F = values.shape[:2]
     values = values.astype(np.float32)  # twice as fast; far finer than any tolerance
     tol = tol.astype(np.float32)
@@ -190,11 +200,11 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarr
     # a frame its two neighbours cannot predict is kept from the start: on
     # noisy channels this settles most keys in one pass instead of many rounds
     if F > 2:
-        keep[:, 1:-1] = _midpoint_errors(values, rotation) > tol[:, None]
+        keep[:, 1:-1] = _midpoint_errors(values, rotation, times) > tol[:, None]
     active = np.arange(C)
     while len(active):
         k = keep[active]
-        err = _errors(values[active], k, rotation)
+        err = _errors(values[active], k, rotation, times)
         err[k] = 0.0
         rows = (err > tol[active, None]).any(axis=1)
         if not rows.any():
@@ -244,12 +254,12 @@ def _subtree(parent: np.ndarray, rows: np.ndarray):
     return np.where(p >= 0, new[np.maximum(p, 0)], -1)
 
 
-def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec):
-    """Worst world errors per joint over all frames: position (m, joint base
+def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec, times=None):
+    """Worst world errors per joint over all samples: position (m, joint base
     and segment tip) and angle (rad), as a viewer rebuilds them from the
     kept keys (lerp, slerp, then the joint hierarchy)."""
-    t_r = np.swapaxes(_interpolate(np.swapaxes(t_loc, 0, 1), keep_t, False), 0, 1)
-    q_r = np.swapaxes(_interpolate(np.swapaxes(q_loc, 0, 1), keep_q, True), 0, 1)
+    t_r = np.swapaxes(_interpolate(np.swapaxes(t_loc, 0, 1), keep_t, False, times), 0, 1)
+    q_r = np.swapaxes(_interpolate(np.swapaxes(q_loc, 0, 1), keep_q, True, times), 0, 1)
     wp, wq = forward(parent, depth_order(parent), t_r, q_r)
     e_base = np.linalg.norm(wp - pos, axis=-1).max(axis=0)
     e_tip = np.linalg.norm(wp + qrotate(wq, seg_vec[None]) - pos - qrotate(rot, seg_vec[None]),
@@ -277,11 +287,14 @@ def _quantised(t_loc, q_loc):
 
 
 def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.ndarray,
-            reach: np.ndarray, opts: ReduceOptions, group: np.ndarray | None = None) -> Animation:
+            reach: np.ndarray, opts: ReduceOptions, group: np.ndarray | None = None,
+            times: np.ndarray | None = None) -> Animation:
     """Channels for joints with world motion pos (F, J, 3), rot (F, J, 4)
     (in the output's axes; a joint's rest orientation is the world axes);
     seg_vec (J, 3) rest base-to-tip vectors, m; reach (J,) m (subtree_reach);
-    group (J,) tree index of each joint: tolerances are tightened per tree."""
+    group (J,) tree index of each joint: tolerances are tightened per tree;
+    times (F,) s of the samples when they are not evenly spaced (frames
+    merged with extra sub-frame samples). Channel `frames` index the samples."""
     F, J = pos.shape[:2]
     group = np.zeros(J, np.int64) if group is None else np.asarray(group, np.int64)
     G = int(group.max(initial=-1)) + 1
@@ -318,7 +331,7 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
             k[~c & ~red] = True
             sel = ~c & red
             if sel.any():
-                k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot)
+                k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot, times)
                 # a reduced channel needs its own key times (4 bytes a key); when
                 # that costs more than it saves, keep every frame (shared times)
                 width = vals.shape[2] * 4
@@ -328,7 +341,7 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
         for chunk in _chunks(rows, group):
             e_pos[chunk], e_ang[chunk] = _world_error(
                 _subtree(parent, chunk), t_loc[:, chunk], q_loc[:, chunk], keep_t[chunk],
-                keep_q[chunk], pos[:, chunk], rot[:, chunk], seg_vec[chunk])
+                keep_q[chunk], pos[:, chunk], rot[:, chunk], seg_vec[chunk], times)
         g_pos = np.zeros(G)
         g_ang = np.zeros(G)
         np.maximum.at(g_pos, group, e_pos)

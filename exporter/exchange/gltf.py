@@ -4,11 +4,17 @@ rigid nodes. Units metres, Y up ((x, y, z) -> (x, z, -y), see axes.py).
 
 Layout per animated tree: a root node named after the tree (identity
 transform, the skin's `skeleton`) whose descendants are the joint nodes
-(one per segment, named by its path, parented like the segments); a
-separate root node holds the mesh and the skin (glTF ignores a skinned mesh
-node's own transform, so it has none). A joint's node transform is its
-frame-0 local transform; channels exist only where it changes. Static
-trees are plain meshes with no joints and no animation.
+(one per segment, parented like the segments, named `<tree>_<limb>_s<k>`
+as names.py makes them, the segment path in `extras.segment_path`, a
+terminal joint's segment tip, rest offset Y up, in `extras.tip`); a
+separate root node `<tree>_mesh` holds the mesh and the skin (glTF ignores
+a skinned mesh node's own transform, so it has none). Every node name is
+unique in the file and kept unchanged by three.js, Blender, Maya, Houdini.
+A joint's node transform is its frame-0 local transform; channels exist
+only where it changes. Static trees are plain meshes with no joints and no
+animation. Key times: frame f at (frame_start + f) / fps s.
+`asset.extras.treebake` holds the frame grid (fps, frames, frame_start) and
+the keyframe reduction's world tolerances (`reduction`), for treebake diff.
 """
 
 from __future__ import annotations
@@ -25,11 +31,14 @@ from .. import __version__
 from ..bake import Bake
 from ..fileio import write_bytes
 from .anim import Animation, ReduceOptions, animate, subtree_reach
+from ..names import joint_names
 from .axes import points_y_up, quats_y_up
 from .mesh import TreeMesh, object_mesh
+from .textures import Texture
 
 FLOAT, USHORT, UINT = 5126, 5123, 5125
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
 _IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
 
 
@@ -62,6 +71,13 @@ class _Buffer:
             acc["max"] = [_num(v) for v in flat.max(axis=0)]
         self.accessors.append(acc)
         return len(self.accessors) - 1
+
+    def raw(self, data: bytes) -> int:
+        """A buffer view of raw bytes (an embedded image); returns its index."""
+        self.views.append({"buffer": 0, "byteOffset": self.length, "byteLength": len(data)})
+        self.parts.append(data + b"\0" * (-len(data) % 4))
+        self.length += len(data) + (-len(data) % 4)
+        return len(self.views) - 1
 
     def times(self, seconds: np.ndarray) -> int:
         """A keyframe-time accessor (min/max set, as animation inputs need),
@@ -100,8 +116,15 @@ class GltfResult:
 
 
 class _Document:
-    def __init__(self, name: str, extras: dict | None = None) -> None:
+    def __init__(self, name: str, extras: dict | None = None,
+                 scene_extras: dict | None = None,
+                 textures: dict[str, Texture | None] | None = None) -> None:
         self.extras = extras or {}
+        self.scene_extras = scene_extras or {}
+        self.texture_of = textures or {}  # material -> Texture (None: plain colour)
+        self.images: list[dict] = []
+        self.samplers_tex: list[dict] = []
+        self.textures: list[dict] = []
         self.buf = _Buffer()
         self.nodes: list[dict] = []
         self.meshes: list[dict] = []
@@ -119,11 +142,29 @@ class _Document:
             self.roots.append(len(self.nodes) - 1)
         return len(self.nodes) - 1
 
+    def texture(self, tex: Texture) -> int:
+        """Embed a PNG (image in the buffer, its sampler, the texture)."""
+        self.images.append({"name": tex.name.removesuffix(".png"), "mimeType": "image/png",
+                            "bufferView": self.buf.raw(tex.png)})
+        wrap = REPEAT if tex.repeat else CLAMP_TO_EDGE
+        self.samplers_tex.append({"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
+                                  "wrapS": wrap, "wrapT": wrap})
+        self.textures.append({"sampler": len(self.samplers_tex) - 1,
+                              "source": len(self.images) - 1})
+        return len(self.textures) - 1
+
     def material(self, name: str, colour, double_sided: bool) -> int:
         if name not in self.material_ids:
-            mat = {"name": name, "pbrMetallicRoughness": {
-                "baseColorFactor": _floats([*colour, 1.0]), "metallicFactor": 0,
-                "roughnessFactor": 0.9}}
+            tex = self.texture_of.get(name)
+            pbr = {"baseColorFactor": _floats([*colour, 1.0]), "metallicFactor": 0,
+                   "roughnessFactor": 0.9}
+            if tex is not None:  # the colour is in the texture (sRGB), the factor is white
+                pbr["baseColorFactor"] = [1, 1, 1, 1]
+                pbr["baseColorTexture"] = {"index": self.texture(tex)}
+            mat = {"name": name, "pbrMetallicRoughness": pbr}
+            if tex is not None and tex.cutout:
+                mat["alphaMode"] = "MASK"
+                mat["alphaCutoff"] = 0.5
             if double_sided:
                 mat["doubleSided"] = True
             self.materials.append(mat)
@@ -177,9 +218,13 @@ class _Document:
         asset = {"version": "2.0", "generator": f"treebake {__version__}"}
         if self.extras:
             asset["extras"] = {"treebake": self.extras}
-        doc = {"asset": asset,
-               "scene": 0, "scenes": [{"name": self.name, "nodes": self.roots}],
+        scene = {"name": self.name, "nodes": self.roots}
+        if self.scene_extras:  # Blender makes these the scene's custom properties
+            scene["extras"] = self.scene_extras
+        doc = {"asset": asset, "scene": 0, "scenes": [scene],
                "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
+        if self.textures:
+            doc.update(textures=self.textures, images=self.images, samplers=self.samplers_tex)
         if self.skins:
             doc["skins"] = self.skins
         if self.channels:
@@ -210,8 +255,10 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
               first: int) -> None:
     """Tree i; its joints are rows first..first+S-1 of `anim`."""
     tree = bake.trees[i]
+    # mesh names differ from node names: three.js names a mesh's objects by
+    # both, and would suffix the second one it met
     if anim is None:
-        doc.node({"name": tree.name, "mesh": doc.mesh(mesh, tree.name, skinned=False)},
+        doc.node({"name": tree.name, "mesh": doc.mesh(mesh, f"{tree.name}_geo", skinned=False)},
                  root=True)
         return
     S = tree.n_segments
@@ -221,12 +268,15 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
     for s in range(S):
         children.setdefault(int(tree.seg_parent[s]), []).append(base + s)
     # glTF has no bone length: a terminal joint carries its segment's tip
-    # (rest offset from its base, Y up) so a reader (treebake diff) can pose it
+    # (rest offset from its base, Y up) so a reader (treebake diff) can pose it;
+    # every joint carries its segment path (node names are made tool-safe)
     tips = points_y_up(tree.points[tree.seg_end] - tree.points[tree.seg_start])
-    for s in range(S):
-        extras = {} if s in children else {"extras": {"tip": _floats(tips[s])}}
-        doc.node({"name": tree.paths[s],
-                  **_trs(anim.translation[first + s], anim.rotation[first + s]), **extras})
+    for s, name in enumerate(joint_names(tree.name, tree.paths)):
+        extras = {"segment_path": tree.paths[s]}
+        if s not in children:
+            extras["tip"] = _floats(tips[s])
+        doc.node({"name": name, **_trs(anim.translation[first + s], anim.rotation[first + s]),
+                  "extras": extras})
     doc.nodes[root]["children"] = children.get(-1, [])
     for s, kids in children.items():
         if s >= 0:
@@ -237,82 +287,124 @@ def _add_tree(doc: _Document, bake: Bake, i: int, mesh: TreeMesh, anim: Animatio
     ibm_acc = doc.buf.add(ibm.reshape(S, 16), FLOAT, "MAT4")
     doc.skins.append({"name": tree.name, "inverseBindMatrices": ibm_acc,
                       "skeleton": root, "joints": list(range(base, base + S))})
-    doc.node({"name": f"{tree.name}.mesh", "mesh": doc.mesh(mesh, tree.name, skinned=True),
+    doc.node({"name": f"{tree.name}_mesh", "mesh": doc.mesh(mesh, f"{tree.name}_geo",
+                                                             skinned=True),
               "skin": len(doc.skins) - 1}, root=True)
 
 
-def scene_animation(bake: Bake, trees: list[int], objects: bool,
-                    opts: ReduceOptions) -> tuple[Animation | None, dict[int, int], int]:
-    """Channels for the animated trees in `trees` (and the projectiles), all
-    reduced together (vectorised), each tree with its own error check.
-    Returns the animation, each tree's first joint row, and the first
-    projectile row."""
-    moving = [i for i in trees if not bake.trees[i].static]
+@dataclass
+class AnimationPart:
+    """Channels of trees sharing one time grid: `times` (N,) s of the bake
+    (its frames, plus a tree's extra sub-frame samples), each tree's first
+    joint row (`first`) and the projectiles' first row (or None)."""
+
+    anim: Animation
+    times: np.ndarray
+    first: dict[int, int]
+    obj_first: int | None = None
+
+
+def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: bool,
+                     opts: ReduceOptions) -> AnimationPart | None:
     first: dict[int, int] = {}
     parents, pos, rot, vec, reach, group = [], [], [], [], [], []
     n = 0
-    for g, i in enumerate(moving):
+    for g, i in enumerate(trees):
         t = bake.trees[i]
         first[i] = n
+        _, p, q = t.samples(bake.times)
         parents.append(np.where(t.seg_parent >= 0, t.seg_parent + n, -1))
-        pos.append(points_y_up(t.positions))
-        rot.append(quats_y_up(t.rotations))
+        pos.append(points_y_up(p))
+        rot.append(quats_y_up(q))
         b, e = points_y_up(t.points[t.seg_start]), points_y_up(t.points[t.seg_end])
         vec.append(e - b)
         margin = float(t.leaf_size.max(initial=0.0)) + float(t.width.max(initial=0.0))
         reach.append(subtree_reach(t.seg_parent, b, e) + margin)
         group.append(np.full(t.n_segments, g))
         n += t.n_segments
-    obj_first = n
+    obj_first = None
     if objects and bake.objects is not None and len(bake.objects.sizes):
         o = bake.objects
         k = len(o.sizes)
+        obj_first = n
         parents.append(np.full(k, -1))
         pos.append(points_y_up(o.positions))
         rot.append(quats_y_up(o.rotations))
         vec.append(np.zeros((k, 3)))
         reach.append(np.asarray(o.sizes, np.float64))
-        group.append(len(moving) + np.arange(k))
+        group.append(len(trees) + np.arange(k))
     if not parents:
-        return None, first, obj_first
+        return None
     anim = animate(np.concatenate(parents), np.concatenate(pos, axis=1),
                    np.concatenate(rot, axis=1), np.concatenate(vec), np.concatenate(reach),
-                   opts, np.concatenate(group))
-    return anim, first, obj_first
+                   opts, np.concatenate(group), times=times)
+    return AnimationPart(anim, times, first, obj_first)
+
+
+def scene_animation(bake: Bake, trees: list[int], objects: bool,
+                    opts: ReduceOptions) -> list[AnimationPart]:
+    """Channels for the animated trees in `trees` (and the projectiles),
+    reduced together (vectorised), each tree with its own error check.
+    Trees on the frame grid share one part; a tree with extra sub-frame
+    samples gets a part of its own on its merged grid."""
+    moving = [i for i in trees if not bake.trees[i].static]
+    plain = [i for i in moving if not len(bake.trees[i].extra_times)]
+    parts = [_group_animation(bake, plain, np.asarray(bake.times, np.float64), objects, opts)]
+    for i in moving:
+        if i not in plain:
+            parts.append(_group_animation(bake, [i], bake.trees[i].samples(bake.times)[0],
+                                          False, opts))
+    return [p for p in parts if p is not None]
 
 
 def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objects: bool,
-          opts: ReduceOptions) -> tuple[_Document, Animation | None]:
+          opts: ReduceOptions, frame_start: int = 1,
+          textures: dict[str, Texture | None] | None = None
+          ) -> tuple[_Document, list[AnimationPart]]:
+    """The glTF document. Key times are (frame_start + frame index) / fps s
+    (bake time + frame_start / fps), so an importer's frame = time x fps
+    (Blender, three.js's AnimationUtils) is the bake's frame number."""
+    n = len(bake.times)
+    fps = bake.fps
+    hint = {"frame_start": frame_start, "frame_end": frame_start + n - 1, "fps": fps}
     # the frame grid, so a reader (treebake diff) can sample reduced channels,
     # and the reduction's world tolerances: how far the file may be from its bake
     reduction = {"position_m": opts.position_tolerance if opts.enabled else 0.0,
                  "angle_deg": round(math.degrees(opts.angle_tolerance), 9) if opts.enabled
                  else 0.0}
-    doc = _Document(name, {"fps": bake.fps, "frames": len(bake.times), "reduction": reduction})
-    anim, first, obj_first = scene_animation(bake, trees, objects, opts)
-    joint_node: dict[int, int] = {}
+    doc = _Document(name, {"fps": fps, "frames": n, "frame_start": frame_start,
+                           "reduction": reduction}, hint, textures)
+    parts = scene_animation(bake, trees, objects, opts)
+    part_of = {i: p for p in parts for i in p.first}
+    joint_node: dict[tuple[int, int], int] = {}  # (part, joint row) -> node
     for i in trees:
-        if i in first:
-            joint_node[first[i]] = len(doc.nodes) + 1  # root node, then the joints
-        _add_tree(doc, bake, i, meshes[i], anim if i in first else None, first.get(i, 0))
-    if objects and bake.objects is not None:
+        part = part_of.get(i)
+        if part is not None:
+            joint_node[(id(part), part.first[i])] = len(doc.nodes) + 1  # the root, then joints
+        _add_tree(doc, bake, i, meshes[i], None if part is None else part.anim,
+                  0 if part is None else part.first[i])
+    obj = next((p for p in parts if p.obj_first is not None), None)
+    if obj is not None:
         o = bake.objects
         shared: dict[tuple, int] = {}
         for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
             key = (shape, float(size))
             if key not in shared:
-                shared[key] = doc.mesh(object_mesh(shape, float(size)), f"{shape} {size:g} m",
-                                       skinned=False)
-            joint_node[obj_first + k] = doc.node({
+                shared[key] = doc.mesh(object_mesh(shape, float(size)),
+                                       f"{shape}_{round(float(size) * 1000)}mm", skinned=False)
+            row = obj.obj_first + k
+            joint_node[(id(obj), row)] = doc.node({
                 "name": f"projectile_{k}", "mesh": shared[key],
-                **_trs(anim.translation[obj_first + k], anim.rotation[obj_first + k])}, root=True)
-    if anim is not None:
-        rows = np.array(sorted(joint_node))
-        for ch in anim.channels:
+                **_trs(obj.anim.translation[row], obj.anim.rotation[row])}, root=True)
+    offset = frame_start / fps
+    for part in parts:
+        rows = np.array(sorted(r for (pid, r) in joint_node if pid == id(part)))
+        seconds = part.times + offset
+        for ch in part.anim.channels:
             r = int(rows[np.searchsorted(rows, ch.joint, side="right") - 1])
-            doc.channel(int(joint_node[r] + ch.joint - r), ch.path, bake.times[ch.frames],
-                        ch.values)
-    return doc, anim
+            doc.channel(int(joint_node[(id(part), r)] + ch.joint - r), ch.path,
+                        seconds[ch.frames], ch.values)
+    return doc, parts
 
 
 def write(path: str | Path, doc: _Document) -> list[Path]:
@@ -336,9 +428,12 @@ def write(path: str | Path, doc: _Document) -> list[Path]:
 
 def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                 binary: bool = True, split: bool = False,
-                opts: ReduceOptions | None = None) -> GltfResult:
+                opts: ReduceOptions | None = None, frame_start: int = 1,
+                textures: dict[str, Texture | None] | None = None) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
-    `name.<tree>.glb`, and the projectiles in `name.objects.glb`."""
+    `name.<tree>.glb`, and the projectiles in `name.objects.glb`. Bake
+    frame f (0-based) is keyed at (frame_start + f) / fps s. `textures`:
+    material name -> Texture to embed (textures.py); others stay plain."""
     out = Path(out)
     opts = opts or ReduceOptions()
     ext = ".glb" if binary else ".gltf"
@@ -352,16 +447,19 @@ def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
     result = GltfResult()
     reports = []
     for stem, trees, objects in jobs:
-        doc, anim = build(bake, stem, meshes, trees, objects, opts)
+        doc, parts = build(bake, stem, meshes, trees, objects, opts, frame_start, textures)
         result.files += write(out / f"{stem}{ext}", doc)
-        if anim is not None:
-            reports.append(anim.report)
+        reports += [p.anim.report for p in parts]
     for i, m in enumerate(meshes):
         result.vertices += m.n_vertices
         result.triangles += m.n_triangles
         if not bake.trees[i].static:
             result.joints += bake.trees[i].n_segments
     result.animation = merge_reports(reports)
+    if result.animation:
+        result.animation["frames"] = len(bake.times)
+        result.animation["extra_samples"] = sum(len(t.extra_times) for t in bake.trees
+                                                if not t.static)
     return result
 
 

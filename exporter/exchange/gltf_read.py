@@ -1,11 +1,12 @@
 """Read the motion back out of a treebake glTF (.glb or .gltf + .bin), as a
 Bake, so `treebake diff` can compare exported files.
 
-Each skin is a tree: its joints are the segments (named by their paths),
+Each skin is a tree: its joints are the segments (paths in node extras),
 parented like the segments, each joint's rest rotation the identity and its
 rest position the inverse bind matrix's translation. Channels are sampled at
 every frame (the frame grid is in `asset.extras.treebake`, written by our
-exporter; otherwise the union of the key times) with glTF's LINEAR rule
+exporter: frame f is keyed at (frame_start + f) / fps s; otherwise the
+union of the key times) with glTF's LINEAR rule
 (slerp for rotations), composed down the hierarchy, and turned back from
 Y up to our Z up. Static trees (plain meshes) come back with no segments.
 glTF has no segment tips: our exporter writes a terminal joint's tip in its
@@ -194,9 +195,11 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
                                  "quaternion (damaged data)")
             channels[(ch["target"]["node"], ch["target"]["path"])] = (keys, values)
             all_keys.append(keys)
+    offset = 0.0  # key time of the bake's first frame (files before frame_start: 0)
     if "fps" in info and "frames" in info:
-        times = np.arange(int(info["frames"])) / float(info["fps"])
         fps = float(info["fps"])
+        offset = float(info.get("frame_start", 0)) / fps
+        times = np.arange(int(info["frames"])) / fps
     elif all_keys:
         times = np.unique(np.round(np.concatenate(all_keys), 6))
         fps = 1.0 / float(np.min(np.diff(times))) if len(times) > 1 else 24.0
@@ -220,9 +223,10 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             t_loc[:, s] = node.get("translation", [0.0, 0.0, 0.0])
             q_loc[:, s] = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
             if (j, "translation") in channels:
-                t_loc[:, s] = _sample(times, *channels[(j, "translation")], rotation=False)
+                t_loc[:, s] = _sample(times + offset, *channels[(j, "translation")],
+                                      rotation=False)
             if (j, "rotation") in channels:
-                q_loc[:, s] = _sample(times, *channels[(j, "rotation")], rotation=True)
+                q_loc[:, s] = _sample(times + offset, *channels[(j, "rotation")], rotation=True)
         norms = np.linalg.norm(q_loc, axis=-1)
         if np.abs(norms - 1.0).max(initial=0.0) > 1e-3:
             raise ValueError(f"skin {skin.get('name')!r}: a joint rotation is not a unit "
@@ -243,7 +247,9 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
             tips.append(rest[s] + points_z_up(np.asarray(tip, float)[None])[0])
         if tips:
             rest = np.concatenate([rest, np.asarray(tips)])
-        paths = [nodes[j].get("name", f"joint{s}") for s, j in enumerate(joints)]
+        # the segment path rides in extras (node names are made tool-safe)
+        paths = [nodes[j].get("extras", {}).get("segment_path", nodes[j].get("name", f"joint{s}"))
+                 for s, j in enumerate(joints)]
         tree_info: dict = {"source": p.name}
         if tipless:
             tree_info["tipless"] = tipless

@@ -1,6 +1,7 @@
-"""OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (1-based,
-zero-padded to 4 digits or more: file number = bake frame index + 1), one
-shared `name.mtl`. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
+"""OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (file
+number = frame_start + bake frame index, zero-padded to 4 digits or more),
+one shared `name.mtl`. Frames only: extra sub-frame samples are not
+written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
 
 Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
 `vn` (one of each per vertex, so faces are `f i/i/i j/j/j k/k/k`) and
@@ -33,13 +34,24 @@ def _safe(name: str) -> str:
     return "_".join(str(name).split()) or "unnamed"
 
 
-def mtl_text(materials: dict[str, tuple[float, float, float]]) -> str:
+def mtl_text(materials: dict[str, tuple[float, float, float]],
+             maps: dict[str, tuple[str, bool]] | None = None) -> str:
+    """The .mtl: per material its colour, or with `maps` (material ->
+    (relative PNG path, cutout)) its texture as map_Kd (Kd white, so readers
+    that multiply keep the texture's colour) and, for cutout cards, map_d
+    (the PNG's alpha)."""
+    maps = maps or {}
     out = [f"# treebake {__version__} materials"]
     for name, colour in materials.items():
-        r, g, b = colour
+        r, g, b = (1.0, 1.0, 1.0) if name in maps else colour
         out += ["", f"newmtl {name}", "Ka 0.000000 0.000000 0.000000",
                 f"Kd {r:.6f} {g:.6f} {b:.6f}", "Ks 0.000000 0.000000 0.000000",
                 "Ns 10.000000", "d 1.000000", "illum 1"]
+        if name in maps:
+            path, cutout = maps[name]
+            out.append(f"map_Kd {path}")
+            if cutout:
+                out.append(f"map_d {path}")
     return "\n".join(out) + "\n"
 
 
@@ -76,8 +88,12 @@ def frame_digits(frames: int) -> int:
 
 
 def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
-               stride: int = 1, progress: Callable[[int, int], None] | None = None) -> ObjResult:
-    """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th frame."""
+               stride: int = 1, progress: Callable[[int, int], None] | None = None,
+               frame_start: int = 1, maps: dict[str, tuple[str, bool]] | None = None
+               ) -> ObjResult:
+    """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th
+    frame, NNNN = frame_start + the bake's frame index; `maps`: textures
+    for the .mtl (mtl_text)."""
     if stride < 1:
         raise ValueError("stride must be >= 1")
     out = Path(out)
@@ -99,11 +115,12 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             offset += mesh.n_vertices
     result = ObjResult()
     mtl = f"{name}.mtl"
-    result.files.append(write_bytes(out / mtl, mtl_text(materials).encode("ascii")))
+    result.files.append(write_bytes(out / mtl, mtl_text(materials, maps).encode("ascii")))
     frames = list(range(0, len(bake.times), stride))
-    digits = frame_digits(len(bake.times))
+    digits = frame_digits(frame_start + len(bake.times) - 1)
     for done, f in enumerate(frames):
-        header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, frame {f + 1}, "
+        header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, "
+                  f"frame {frame_start + f}, "
                   f"t = {float(bake.times[f]):.6f} s, metres, Y up\n")
         parts = [header, f"mtllib {mtl}\n"]
         for tree, blk in zip(bake.trees, blocks):
@@ -113,7 +130,7 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             p, n = pose_rigid(blk.mesh, bake.objects.positions[f, k].astype(np.float64),
                               bake.objects.rotations[f, k])
             parts.append(_object_text(blk, p, n))
-        path = out / f"{name}.{f + 1:0{digits}d}.obj"
+        path = out / f"{name}.{frame_start + f:0{digits}d}.obj"
         result.files.append(write_bytes(path, "".join(parts).encode("ascii")))
         result.frames.append(f)
         if progress is not None:

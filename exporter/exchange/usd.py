@@ -4,11 +4,13 @@ materials, projectiles as Xforms with time-sampled translate/orient.
 
 Stage metadata: upAxis "Y" (coordinates converted like glTF:
 (x, y, z) -> (x, z, -y)), metersPerUnit 1, timeCodesPerSecond =
-framesPerSecond = the bake's fps, startTimeCode 1, endTimeCode = frame count
-(time code = bake frame index + 1, the OBJ sequence's numbering), defaultPrim
-= the job's root Xform. Joints are named "s<segment>" in a path hierarchy
-("s0/s1/s5"); the original segment paths are in the Skeleton's
-`treebake:segmentPaths` attribute. Static trees are plain meshes.
+framesPerSecond = the bake's fps, startTimeCode = frame_start, endTimeCode =
+frame_start + frames - 1 (time code = frame_start + bake time x fps: frame
+numbers like the OBJ sequence's; extra sub-frame samples get fractional
+codes), defaultPrim = the job's root Xform. Joints carry the glTF joint names (names.py,
+`oak_trunk_2_1_s3`) in a path hierarchy that follows the segments; the
+original segment paths are in the Skeleton's `treebake:segmentPaths`
+attribute. Static trees are plain meshes.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from ..bake import Bake
 from ..errors import TreebakeError
 from ..fileio import write_bytes
+from ..names import joint_names
 from ..rotations import continuous, qnormalize
 from .anim import local_transforms
 from .axes import points_y_up, quats_y_up
@@ -47,16 +50,18 @@ class UsdResult:
     validation_errors: list[str] = field(default_factory=list)
 
 
-def joint_tokens(parent: np.ndarray) -> list[str]:
-    """UsdSkel joint paths: "s<i>" under its parent's path."""
+def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
+    """UsdSkel joint paths: each joint's name under its parent's path, so the
+    path follows the tree (`oak_trunk_s0/oak_trunk_s1/oak_trunk_1_s0`)."""
     out: list[str] = []
     for s, p in enumerate(parent.tolist()):  # parents come first
-        out.append(f"s{s}" if p < 0 else f"{out[p]}/s{s}")
+        out.append(names[s] if p < 0 else f"{out[p]}/{names[s]}")
     return out
 
 
 class _Writer:
-    def __init__(self, bake: Bake, name: str) -> None:
+    def __init__(self, bake: Bake, name: str, frame_start: int = 1,
+                 maps: dict[str, tuple[str, bool]] | None = None) -> None:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
         self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
@@ -68,13 +73,15 @@ class _Writer:
         fps = bake.fps
         st.SetTimeCodesPerSecond(fps)
         st.SetFramesPerSecond(fps)
-        st.SetStartTimeCode(1.0)
-        st.SetEndTimeCode(float(len(bake.times)))
+        self.frame_start = frame_start
+        st.SetStartTimeCode(float(frame_start))
+        st.SetEndTimeCode(float(frame_start + len(bake.times) - 1))
         self.root = f"/{self.ident(name)}"
         root = UsdGeom.Xform.Define(st, self.root)
         st.SetDefaultPrim(root.GetPrim())
         Usd.ModelAPI(root.GetPrim()).SetKind("assembly")
         self.materials: dict[str, object] = {}
+        self.maps = maps or {}  # material -> (texture path relative to the file, cutout)
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
 
     def ident(self, name: str) -> str:
@@ -95,13 +102,38 @@ class _Writer:
             mat = self.UsdShade.Material.Define(self.stage, path)
             sh = self.UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
             sh.CreateIdAttr("UsdPreviewSurface")
-            sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f).Set(
-                self.Gf.Vec3f(*[float(c) for c in colour]))
+            diffuse = sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f)
+            if name in self.maps:
+                self.texture(path, sh, diffuse, *self.maps[name])
+            else:
+                diffuse.Set(self.Gf.Vec3f(*[float(c) for c in colour]))
             sh.CreateInput("roughness", self.Sdf.ValueTypeNames.Float).Set(0.9)
             sh.CreateInput("metallic", self.Sdf.ValueTypeNames.Float).Set(0.0)
             mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
             self.materials[name] = mat
         return self.materials[name]
+
+    def texture(self, path: str, surface, diffuse, file: str, cutout: bool) -> None:
+        """diffuseColor (and for cutout cards opacity, thresholded at 0.5)
+        from a UsdUVTexture reading `file` at the mesh's `st` primvar."""
+        Sdf, UsdShade = self.Sdf, self.UsdShade
+        reader = UsdShade.Shader.Define(self.stage, f"{path}/stReader")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        tex = UsdShade.Shader.Define(self.stage, f"{path}/Texture")
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+        wrap = "clamp" if cutout else "repeat"
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+            reader.ConnectableAPI(), "result")
+        diffuse.ConnectToSource(tex.ConnectableAPI(), "rgb")
+        if cutout:
+            surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
+                tex.ConnectableAPI(), "a")
+            surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
 
     def meshes(self, parent: str, mesh: TreeMesh, skel_path: str | None,
                offset: np.ndarray | None = None) -> None:
@@ -154,9 +186,10 @@ class _Writer:
         path = self.unique(self.root, t.name)
         self.UsdSkel.Root.Define(self.stage, path)
         skel = self.UsdSkel.Skeleton.Define(self.stage, f"{path}/Skel")
-        tokens = joint_tokens(t.seg_parent)
+        names = joint_names(t.name, t.paths)
+        tokens = joint_tokens(t.seg_parent, names)
         skel.CreateJointsAttr(Vt.TokenArray(tokens))
-        skel.CreateJointNamesAttr(Vt.TokenArray([self.ident(p) for p in t.paths]))
+        skel.CreateJointNamesAttr(Vt.TokenArray(names))
         rest = points_y_up(t.points[t.seg_start]).astype(np.float64)
         S = t.n_segments
         bind = np.tile(np.eye(4), (S, 1, 1))
@@ -171,15 +204,15 @@ class _Writer:
                                        self.Sdf.ValueTypeNames.StringArray).Set(list(t.paths))
         anim = self.UsdSkel.Animation.Define(self.stage, f"{path}/Skel/Anim")
         anim.CreateJointsAttr(Vt.TokenArray(tokens))
-        pos = points_y_up(t.positions)
-        rot = continuous(qnormalize(quats_y_up(t.rotations).astype(np.float64)), axis=0)
+        times, positions, rotations = t.samples(self.bake.times)
+        pos = points_y_up(positions)
+        rot = continuous(qnormalize(quats_y_up(rotations).astype(np.float64)), axis=0)
         t_loc, q_loc = local_transforms(par, pos, rot)
         q_loc = continuous(qnormalize(q_loc), axis=0).astype(np.float32)
         t_loc = t_loc.astype(np.float32)
         ta, ra = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr()
         anim.CreateScalesAttr(Vt.Vec3hArray(S, Gf.Vec3h(1.0, 1.0, 1.0)))
-        for f in range(len(t_loc)):
-            code = float(f + 1)
+        for f, code in enumerate(self.codes(times)):
             ta.Set(Vt.Vec3fArray.FromNumpy(t_loc[f]), code)
             ra.Set(Vt.QuatfArray.FromNumpy(q_loc[f]), code)
         self.UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
@@ -200,8 +233,7 @@ class _Writer:
             x = self.UsdGeom.Xform.Define(self.stage, f"{group}/projectile_{k}")
             tr = x.AddTranslateOp(self.UsdGeom.XformOp.PrecisionDouble)
             orient = x.AddOrientOp(self.UsdGeom.XformOp.PrecisionFloat)
-            for f in range(pos.shape[0]):
-                code = float(f + 1)
+            for f, code in enumerate(self.codes(self.bake.times)):
                 tr.Set(Gf.Vec3d(*pos[f, k].tolist()), code)
                 q = rot[f, k]
                 orient.Set(Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
@@ -209,6 +241,10 @@ class _Writer:
             for part in mesh.parts:
                 part.colour = OBJECT_COLOUR
             self.meshes(f"{group}/projectile_{k}", mesh, None)
+
+    def codes(self, times: np.ndarray) -> list[float]:
+        """USD time codes of sample times (s): frame numbers, fractional between."""
+        return [float(c) for c in self.frame_start + np.asarray(times) * self.bake.fps]
 
     def save(self, path: Path) -> bytes:
         """The stage's bytes in the format the extension asks (.usda text,
@@ -236,10 +272,14 @@ def validate(path: str | Path) -> list[str]:
 
 def export_usd(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                ascii: bool = False, check: bool = True,
-               progress: Callable[[int, int], None] | None = None) -> UsdResult:
-    """Write `out/name.usd` (binary crate) or `out/name.usda` (text)."""
-    w = _Writer(bake, name)
-    result = UsdResult(time_codes=(1.0, float(len(bake.times))))
+               progress: Callable[[int, int], None] | None = None,
+               frame_start: int = 1,
+               maps: dict[str, tuple[str, bool]] | None = None) -> UsdResult:
+    """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
+    frame f at time code frame_start + f; `maps`: material -> (texture
+    path relative to the file, cutout) for the preview surfaces."""
+    w = _Writer(bake, name, frame_start, maps)
+    result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
     for i, mesh in enumerate(meshes):
         result.joints += w.tree(i, mesh)
         if progress is not None:

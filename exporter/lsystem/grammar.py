@@ -16,12 +16,13 @@ from pathlib import Path
 
 from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
+from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
 from .symbols import AT_COMMANDS
 
 Module = tuple[str, tuple[float, ...]]
 
 MAX_FILE_BYTES = 1_000_000
-MAX_ITERATIONS = 1000
+
 _NAME = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
 _ARROW = re.compile(r"-\((?P<prob>[^()]*)\)->|-->|→|(?<!<)->")
 _RESERVED = set("(),:")
@@ -59,7 +60,8 @@ class Production:
 
 @dataclass(frozen=True)
 class PhysicsDefaults:
-    """Tree-wide physics defaults a grammar header may set (SI units).
+    """Tree-wide physics defaults a grammar header may set (SI units; meaning,
+    unit, default and range of each: lsystem/settings.py PHYSICS).
 
     density: green wood density, kg/m^3. modulus: Young's modulus, Pa.
     damping: structural damping ratio of the first mode (dimensionless).
@@ -71,17 +73,17 @@ class PhysicsDefaults:
     coefficient. leaf_drag: leaf drag coefficient.
     """
 
-    density: float = 750.0
-    modulus: float = 8.0e9
-    damping: float = 0.05
-    cone: float = 30.0
-    strength: float = math.inf
-    rupture: float = math.inf
-    anchor: float = math.inf
-    leaf_size: float = 0.15
-    leaf_mass: float = 0.2
-    drag: float = 1.2
-    leaf_drag: float = 0.3
+    density: float = default("density")
+    modulus: float = default("modulus")
+    damping: float = default("damping")
+    cone: float = default("cone")
+    strength: float = default("strength")
+    rupture: float = default("rupture")
+    anchor: float = default("anchor")
+    leaf_size: float = default("leaf size")
+    leaf_mass: float = default("leaf mass")
+    drag: float = default("drag")
+    leaf_drag: float = default("leaf drag")
 
 
 @dataclass(frozen=True)
@@ -94,19 +96,20 @@ class Grammar:
     source_hash: str
     axiom: tuple[Module, ...]
     productions: tuple[Production, ...]
-    iterations: int = 1
-    angle: float = 90.0  # degrees
-    step: float = 1.0  # grammar length units
-    width: float = 0.1  # initial diameter, width units
-    width_factor: float = 0.7  # `!` without argument multiplies width by this
-    seed: int = 0
+    # defaults, units and ranges: lsystem/settings.py (LSYSTEM)
+    iterations: int = default("iterations")
+    angle: float = default("angle")  # degrees
+    step: float = default("step")  # grammar length units
+    width: float = default("width")  # initial diameter, width units
+    width_factor: float = default("width factor")  # `!` without argument multiplies by this
+    seed: int = default("seed")
     ignore: frozenset[str] = frozenset()  # skipped when matching context
     consider: frozenset[str] | None = None  # if set, only these count as context
-    tropism: tuple[float, float, float] = (0.0, 0.0, -1.0)  # world, Z up
-    elasticity: float = 0.0
-    scale: float = 1.0  # metres per grammar length unit
-    width_scale: float = 1.0  # metres per grammar width unit
-    leaves: int = 0  # leaf type at the start (0 = none)
+    tropism: tuple[float, float, float] = default("tropism")  # world, Z up
+    elasticity: float = default("elasticity")
+    scale: float = default("scale")  # metres per grammar length unit
+    width_scale: float = default("width scale")  # metres per grammar width unit
+    leaves: int = default("leaves")  # leaf type at the start (0 = none)
     physics: PhysicsDefaults = field(default_factory=PhysicsDefaults)
     constants: tuple[tuple[str, float], ...] = ()
     description: str = ""
@@ -209,33 +212,11 @@ def _check_brackets(mods: list[_RawModule], err) -> None:
 # the file
 
 
-_HEADER_KEYS = {
-    "axiom": "axiom", "ω": "axiom", "w": "axiom",
-    "iterations": "iterations", "n": "iterations", "derivation length": "iterations",
-    "angle": "angle", "delta": "angle", "δ": "angle",
-    "step": "step", "width": "width", "width factor": "width_factor",
-    "seed": "seed", "ignore": "ignore", "consider": "consider",
-    "module": "modules", "modules": "modules",
-    "tropism": "tropism", "elasticity": "elasticity",
-    "scale": "scale", "width scale": "width_scale",
-    "name": "name", "description": "description", "leaves": "leaves",
-    "density": "density", "modulus": "modulus", "damping": "damping", "cone": "cone",
-    "strength": "strength", "rupture": "rupture", "anchor": "anchor",
-    "leaf size": "leaf_size", "leaf mass": "leaf_mass", "drag": "drag",
-    "leaf drag": "leaf_drag",
-}
-
-# (low, high) allowed values for numeric header settings; None = unbounded.
-_RANGES = {
-    "iterations": (0, MAX_ITERATIONS), "angle": (-360.0, 360.0), "step": (0.0, None),
-    "width": (0.0, None), "width_factor": (0.0, 1.0e3), "seed": (0, 2**63 - 1),
-    "elasticity": (-10.0, 10.0), "scale": (1e-9, 1e9), "width_scale": (1e-9, 1e9),
-    "leaves": (0, 16), "density": (1.0, 5000.0), "modulus": (1e3, 1e12),
-    "damping": (0.0, 2.0), "cone": (0.01, 180.0), "strength": (0.0, math.inf),
-    "rupture": (0.0, math.inf), "anchor": (0.0, math.inf), "leaf_size": (0.0, 10.0),
-    "leaf_mass": (0.0, 10.0), "drag": (0.0, 10.0), "leaf_drag": (0.0, 10.0),
-}
-_INTEGER_KEYS = {"iterations", "seed", "leaves"}
+# every spelling of a setting -> its field name (the table's names and aliases;
+# "w" is ABOP's omega typed on a keyboard)
+_HEADER_KEYS = {**{alias: field_name(k.name) for k in SETTINGS.values()
+                   for alias in (k.name, *k.aliases)}, "w": "axiom"}
+_KEYS = {field_name(k.name): k for k in SETTINGS.values()}  # field name -> Key
 
 
 def _strip_comment(line: str) -> str:
@@ -357,13 +338,12 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
             continue
         else:
             v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
-            lo, hi = _RANGES[key]
-            if (lo is not None and v < lo) or (hi is not None and v > hi):
-                rng = f"[{lo}, {hi if hi is not None else 'inf'}]"
-                raise err(f"{key} = {v:g} is out of range {rng}", col)
-            if key in _INTEGER_KEYS:
+            spec = _KEYS[key]
+            if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi):
+                raise err(f"{spec.name} {spec.out_of_range(float(v))}", col)
+            if spec.kind == "integer":
                 if v != int(v):
-                    raise err(f"{key} must be a whole number, got {v:g}", col)
+                    raise err(f"{spec.name} must be a whole number, got {v:g}", col)
                 v = int(v)
             settings[key] = v
     if "ignore" in settings and "consider" in settings:
@@ -386,7 +366,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
 
     productions = _parse_productions(production_lines, constants, declared, file)
 
-    physics_keys = set(PhysicsDefaults.__dataclass_fields__)
+    physics_keys = {field_name(k) for k in PHYSICS}
     physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
     grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
                     "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",

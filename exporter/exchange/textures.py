@@ -1,0 +1,241 @@
+"""Generated textures for the film look: bark (tileable colour, ridges
+along the limb) and leaf cards (a cluster of leaves, a spray of needles or
+palm leaflets on a transparent background, alpha 0 or 255 for cutout
+rendering), as PNG bytes. Pillow and numpy only.
+
+Deterministic: fixed seeds, integer noise (no FFT or transcendental numpy
+functions, whose last bits vary by CPU), Pillow's non-antialiased drawing
+reduced 2x by box averaging; PNG written without timestamps. The same
+versions give the same bytes.
+
+Orientation matches the meshes' UVs (mesh.py): bark u runs around the
+limb, v along it (one repeat per `bark_tile` m); a leaf card's stem is at
+v = 0, the bottom of the image.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from .mesh import BARK_COLOUR, leaf_colour
+
+BARK_SIZE = (256, 512)  # px: u (around) x v (along)
+CARD_SIZE = 512  # px, square leaf cards
+SEED = 20260415  # fixed: the look is part of the product, not of a scene
+
+# leaf type -> card style (mesh.LEAF_COLOURS gives the colour)
+STYLES = {1: "broadleaf", 2: "needles", 3: "leaflets", 4: "broadleaf"}
+
+
+@dataclass(frozen=True)
+class Texture:
+    """A texture: file name (`bark.png`), PNG bytes, whether it repeats
+    (bark) or is clamped (cards), whether its alpha is a cutout mask."""
+
+    name: str
+    png: bytes
+    repeat: bool
+    cutout: bool
+
+
+def texture_for(material: str) -> Texture | None:
+    """The texture of a mesh material ("bark", "leaf", "leaf2", ...), or
+    None for materials that stay plain (projectiles)."""
+    if material == "bark":
+        return bark_texture()
+    if material.startswith("leaf"):
+        kind = int(material[4:] or 1)
+        return leaf_texture(kind)
+    return None
+
+
+def srgb8(linear) -> np.ndarray:
+    """Linear RGB 0..1 -> 8-bit sRGB (texture pixels are sRGB in every format)."""
+    c = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
+    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    return np.round(255 * s).astype(np.int64)
+
+
+def _png(image: Image.Image) -> bytes:
+    buf = io.BytesIO()
+    image.save(buf, format="PNG", optimize=False, compress_level=9)
+    return buf.getvalue()
+
+
+# ---------------------------------------------------------------------------
+# integer value noise (periodic, platform-independent)
+
+
+def _value_noise(rng: np.random.Generator, h: int, w: int, cells_y: int,
+                 cells_x: int) -> np.ndarray:
+    """(h, w) int64 in 0..65535: a periodic lattice of random values
+    (cells_y x cells_x cells) smoothly interpolated in fixed point."""
+    lattice = rng.integers(0, 65536, size=(cells_y, cells_x), dtype=np.int64)
+    cy, cx = h // cells_y, w // cells_x
+    y, x = np.arange(h), np.arange(w)
+    iy, ix = y // cy, x // cx
+    # smoothstep 3t^2 - 2t^3 in 1/4096 units
+    ty = ((y % cy) * 4096) // cy
+    tx = ((x % cx) * 4096) // cx
+    sy = (ty * ty * (3 * 4096 - 2 * ty)) // (4096 * 4096)
+    sx = (tx * tx * (3 * 4096 - 2 * tx)) // (4096 * 4096)
+    a = lattice[iy[:, None], ix[None, :]]
+    b = lattice[iy[:, None], ((ix + 1) % cells_x)[None, :]]
+    c = lattice[((iy + 1) % cells_y)[:, None], ix[None, :]]
+    d = lattice[((iy + 1) % cells_y)[:, None], ((ix + 1) % cells_x)[None, :]]
+    top = a * (4096 - sx) + b * sx
+    bottom = c * (4096 - sx) + d * sx
+    return (top * (4096 - sy[:, None]) + bottom * sy[:, None]) // (4096 * 4096)
+
+
+def _fractal(rng, h, w, octaves) -> np.ndarray:
+    """Sum of value-noise octaves ((cells_y, cells_x, weight), ...) -> 0..65535."""
+    total = sum(wt for _, _, wt in octaves)
+    acc = sum(wt * _value_noise(rng, h, w, cy, cx) for cy, cx, wt in octaves)
+    return acc // total
+
+
+# ---------------------------------------------------------------------------
+# bark
+
+
+@cache
+def bark_texture() -> Texture:
+    """Furrowed bark: plates along the limb separated by dark fissures,
+    tileable both ways, mean colour near mesh.BARK_COLOUR."""
+    w, h = BARK_SIZE
+    rng = np.random.default_rng(SEED)
+    # long in v (image rows), narrow in u: ridges run along the limb
+    ridges = _fractal(rng, h, w, ((4, 16, 6), (8, 32, 3), (16, 64, 1)))
+    fine = _fractal(rng, h, w, ((64, 64, 2), (128, 128, 1)))
+    # fissures where the ridge field is near its middle value
+    dist = np.abs(ridges - 32768)  # 0 at a fissure
+    plate = np.minimum(dist * 3, 65535)  # 0..65535, flat on plates
+    shade = (plate * 3 + fine) // 4  # 0..65535
+    base = srgb8(np.asarray(BARK_COLOUR) * 0.8)
+    dark = srgb8(np.asarray(BARK_COLOUR) * 0.12)
+    light = srgb8(np.minimum(np.asarray(BARK_COLOUR) * 1.4, 1.0))
+    mid = 32768
+    lo = dark[None, None, :] + ((base - dark)[None, None, :] * np.minimum(shade, mid)[..., None]
+                                ) // mid
+    hi = base[None, None, :] + ((light - base)[None, None, :] *
+                                np.maximum(shade - mid, 0)[..., None]) // mid
+    rgb = np.where(shade[..., None] < mid, lo, hi)
+    image = Image.fromarray(np.flipud(rgb).astype(np.uint8), "RGB")  # v = 0 at the bottom
+    return Texture("bark.png", _png(image), repeat=True, cutout=False)
+
+
+# ---------------------------------------------------------------------------
+# leaf cards
+
+
+def _shade(rgb: np.ndarray, k: float) -> tuple[int, int, int, int]:
+    return (*(int(v) for v in np.clip(np.round(rgb * k), 0, 255)), 255)
+
+
+def _leaf_outline(x, y, length, width, angle, n=18) -> list[tuple[int, int]]:
+    """An ovate leaf from its base (x, y) along `angle` (radians, image
+    coordinates, y down), as a polygon."""
+    ca, sa = math.cos(angle), math.sin(angle)
+    side = []
+    for i in range(n + 1):
+        t = i / n
+        half = width * math.sin(math.pi * t) * (1.0 - 0.35 * t)  # widest below the middle
+        side.append((t * length, half))
+    pts = [(u, v) for u, v in side] + [(u, -v) for u, v in reversed(side)]
+    return [(round(x + u * ca - v * sa), round(y + u * sa + v * ca)) for u, v in pts]
+
+
+def _twig(draw, rng, x0, y0, length, angle, width, colour):
+    """A twig from (x0, y0): returns points along it (for leaves to hang on)."""
+    pts = []
+    bend = rng.uniform(-0.25, 0.25)
+    x, y = x0, y0
+    steps = 12
+    for i in range(steps + 1):
+        a = angle + bend * i / steps
+        pts.append((x, y, a))
+        nx, ny = x + math.cos(a) * length / steps, y + math.sin(a) * length / steps
+        draw.line([(round(x), round(y)), (round(nx), round(ny))], fill=colour,
+                  width=max(1, round(width * (1 - 0.6 * i / steps))))
+        x, y = nx, ny
+    return pts
+
+
+def _card(kind: int) -> Image.Image:
+    s = 2 * CARD_SIZE  # drawn at 2x, box-reduced: softer edges, still a crisp mask
+    image = Image.new("RGBA", (s, s), (0, 0, 0, 0))
+    draw = ImageDraw.Draw(image)
+    rng = np.random.default_rng(SEED + kind)
+    colour = srgb8(leaf_colour(kind)).astype(np.float64)
+    stem = _shade(srgb8(np.asarray(BARK_COLOUR) * 0.8), 1.0)
+    style = STYLES.get(kind, "broadleaf")
+    up = -math.pi / 2  # image y points down; the stem rises from the bottom edge
+    main = _twig(draw, rng, s / 2, s - 1, 0.92 * s, up, 0.012 * s, stem)
+    if style == "needles":
+        sprigs = [main] + [_twig(draw, rng, x, y, rng.uniform(0.35, 0.48) * s,
+                                 a + side * rng.uniform(0.5, 0.8), 0.006 * s, stem)
+                           for i, (x, y, a) in enumerate(main[2:11])
+                           for side in ((-1, 1)[i % 2],)]
+        for twig in sprigs:
+            # dense and thick: a sparse card would vanish in the smaller mipmaps of
+            # an alpha-cutout material (coverage averages below the 0.5 cutoff)
+            for x, y, a in twig[1:]:
+                for side in (-1, 1):
+                    for _ in range(6):
+                        na = a + side * rng.uniform(0.5, 1.2)
+                        ln = rng.uniform(0.05, 0.08) * s
+                        x0, y0 = x + rng.uniform(-10, 10), y + rng.uniform(-10, 10)
+                        c = _shade(colour, rng.uniform(0.75, 1.25))
+                        draw.line([(round(x0), round(y0)),
+                                   (round(x0 + math.cos(na) * ln), round(y0 + math.sin(na) * ln))],
+                                  fill=c, width=max(2, round(0.009 * s)))
+    elif style == "leaflets":
+        for x, y, a in main[1:]:
+            for side in (-1, 1):
+                na = a + side * rng.uniform(1.0, 1.25)
+                ln = rng.uniform(0.28, 0.4) * s * (1.1 - 0.5 * (s - y) / s)
+                draw.polygon(_leaf_outline(x, y, ln, 0.034 * s, na, 10),
+                             fill=_shade(colour, rng.uniform(0.8, 1.2)))
+    else:  # broadleaf: a cluster, alternate ovate leaves on a twig and its side shoots
+        twigs = [main[:-2]] + [_twig(draw, rng, x, y, rng.uniform(0.3, 0.42) * s,
+                                     a + (-1, 1)[i % 2] * rng.uniform(0.5, 0.8), 0.007 * s,
+                                     stem)
+                               for i, (x, y, a) in enumerate(main[3:10:2])]
+        for twig in twigs:
+            for i, (x, y, a) in enumerate(twig[3::2]):
+                side = -1 if i % 2 else 1
+                na = a + side * rng.uniform(0.5, 0.9)
+                ln = rng.uniform(0.14, 0.2) * s
+                draw.polygon(_leaf_outline(x, y, ln, ln * 0.3, na),
+                             fill=_shade(colour, rng.uniform(0.8, 1.2)))
+                draw.line([(round(x), round(y)), (round(x + math.cos(na) * ln * 0.85),
+                                                  round(y + math.sin(na) * ln * 0.85))],
+                          fill=_shade(colour, 0.6), width=max(2, round(0.003 * s)))
+            x, y, a = twig[-1]
+            draw.polygon(_leaf_outline(x, y, 0.16 * s, 0.05 * s, a), fill=_shade(colour, 1.05))
+    small = image.reduce(2)
+    alpha = np.asarray(small)[..., 3]
+    rgba = np.asarray(small).copy()
+    rgba[..., 3] = np.where(alpha >= 128, 255, 0)  # a clean cutout mask
+    # transparent texels carry the leaves' mean colour, not black: mipmaps and
+    # filtering at the cutout's edge then blend toward green, not a dark fringe
+    solid = rgba[..., 3] > 0
+    mean = rgba[solid][:, :3].astype(np.int64).sum(axis=0) // max(int(solid.sum()), 1)
+    rgba[~solid, :3] = mean
+    return Image.fromarray(rgba, "RGBA")
+
+
+@cache
+def leaf_texture(kind: int) -> Texture:
+    """Leaf card of leaf type `kind` (1 broadleaf, 2 conifer needles, 3 palm
+    leaflets, 4 autumn broadleaf): colour where the leaves are, alpha 0
+    elsewhere."""
+    name = "leaf.png" if kind == 1 else f"leaf{kind}.png"
+    return Texture(name, _png(_card(kind)), repeat=False, cutout=True)
