@@ -51,6 +51,27 @@ def tree_energy(tree, fps: float) -> dict:
     return {"energy": e, "ratio": e / max(e[0], 1e-12), "com": com, "mids": mids}
 
 
+def felling_metrics(tree, fps: float) -> dict:
+    """Time from the cut to the main stem's top touching the ground (below 5 %
+    of the height), the stem's resting azimuth (deg, top relative to base),
+    and its centre-of-mass path (every 6th frame)."""
+    events = tree.info.get("events", [])
+    cut = next((e["time"] for e in events if e["kind"] == "cut"), None)
+    if cut is None:
+        return {}
+    stem = [s for s, p in enumerate(tree.paths) if p.startswith("trunk:")]
+    ends = segment_ends(tree, np.asarray(stem))
+    top = ends[:, -1]
+    low = np.nonzero((top[:, 2] < 0.05 * tree.height) & (np.arange(len(top)) / fps > cut))[0]
+    base = tree.positions[:, stem[0]].astype(float)
+    d = top[-1, :2] - base[-1, :2]
+    mids = 0.5 * (tree.positions[:, stem].astype(float) + ends)
+    com = mids.mean(1)
+    return {"cut_s": cut, "to_ground_s": round(float(low[0] / fps - cut), 3) if len(low) else None,
+            "azimuth_deg": round(float(np.degrees(np.arctan2(d[1], d[0]))), 1),
+            "com_path": np.round(com[::6], 2).tolist()}
+
+
 def measure(bake, scene) -> dict:
     out = {"trees": []}
     for tb in bake.trees:
@@ -68,7 +89,12 @@ def measure(bake, scene) -> dict:
             "com_max_after_start": round(float(en["com"][1:, 2].max()), 3),
             "com_end": round(float(en["com"][-1, 2]), 3),
             "broken": broken, "events": [Event.from_record(e).text() for e in events][:6],
-            "farthest_part_m": round(reach, 2)})
+            "farthest_part_m": round(reach, 2),
+            "peak_displacement_pct": round(100 * float(np.linalg.norm(
+                segment_ends(tb, np.arange(tb.n_segments)) - tb.points[tb.seg_end],
+                axis=-1).max()) / tb.height, 2),
+            "audit": bake.meta.get("energy", {}).get(tb.name, {}),
+            **felling_metrics(tb, bake.fps)})
     if bake.objects is not None:
         pos = bake.objects.positions.astype(float)
         out["objects_max_height_after_launch"] = [
@@ -105,7 +131,12 @@ def main() -> None:
                 print(f"{case:<8} {solver:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
                       f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
                       f"{t['com_max_after_start']:.2f} -> end {t['com_end']:.2f}  broken "
-                      f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m", flush=True)
+                      f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m  peak "
+                      f"{t['peak_displacement_pct']:.1f} %  audit gain "
+                      f"{t['audit'].get('max_gain_fraction', 0):.2%}", flush=True)
+                if "to_ground_s" in t:
+                    print(f"{'':<17}cut at {t['cut_s']} s, stem on the ground "
+                          f"{t['to_ground_s']} s later, resting azimuth {t['azimuth_deg']} deg")
                 for e in t["events"]:
                     print(f"{'':<17}{e}")
             if "objects_max_height_after_launch" in m:

@@ -552,13 +552,17 @@ def cmd_accuracy(args) -> int:
             if v not in known:
                 raise InputError(f"unknown {what} {v!r} (choose from {', '.join(known)})")
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
-    data = accuracy(args.out, args.species, args.scenarios, args.duration, log=log)
+    data = accuracy(args.out, args.species, args.scenarios, args.duration,
+                    production=args.production, log=log)
     if args.json:
         print(json.dumps(data["summary"]))
     else:
         for s in data["summary"]:
-            print(f"{s['setting']:<20} {s['solver']:<7} {s['cpu_per_sim_second']:8.3f} cpu s/s "
-                  f"{s['rms_position_pct']:8.3f} % rms   f ratio {s['frequency_ratio']:.3f}")
+            rms = s["rms_position_pct"]
+            dominated = f"  dominated by {', '.join(s['dominated_by'])}" if s["dominated_by"] \
+                else ""
+            print(f"{s['class']:<17} {s['setting']:<31} {s['cpu_per_sim_second'] or 0:8.3f} "
+                  f"cpu s/s {rms if rms is not None else float('nan'):8.4f} % rms{dominated}")
         print(f"written {Path(args.out) / 'report.md'}, report.json, plot.png")
     return 0
 
@@ -572,7 +576,9 @@ def cmd_stability(args) -> int:
             raise InputError(f"unknown case {n!r} (choose from {', '.join(sorted(names))})")
     solvers = ("planar", "full") if args.solver == "both" else (args.solver,)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
-    results = stability(args.out, long=not args.quick, solvers=solvers, only=args.case, log=log)
+    levels = tuple(args.quality) if args.quality else ("draft", "default", "final")
+    results = stability(args.out, long=not args.quick, solvers=solvers, only=args.case,
+                        levels=levels, log=log)
     failed = [r for r in results if not r.passed]
     if args.json:
         from dataclasses import asdict
@@ -739,6 +745,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="*", metavar="NAME",
                    help=f"scenarios, any of: {', '.join(ACCURACY_SCENARIOS)} (default: all)")
     p.add_argument("--duration", type=float, default=5.0, help="seconds per case (default 5)")
+    p.add_argument("--production", action="store_true",
+                   help="add the production cases: oak, spruce, willow, palm and bamboo in "
+                        "breeze and gale, a 50-tree forest in a strong breeze (about an hour)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_accuracy)
@@ -747,18 +756,23 @@ def build_parser() -> argparse.ArgumentParser:
                                           "solvers",
                        description="Run the stress cases (stiffness to x10^4, mass ratios to "
                                    "1:10^4, cones 0.5-90 deg, overlapping and near-zero "
-                                   "segments, wind to 70 m/s, huge blasts, 10-minute runs) on "
-                                   "both solvers; write OUT/report.md and report.json. Exit 1 "
-                                   "if a case fails.")
+                                   "segments, a 200-segment chain, wind to 70 m/s, huge "
+                                   "blasts, 10-minute runs) and the event cases (felling each "
+                                   "species, a crate, a blast and a tornado breaking trees) on "
+                                   "both solvers, the LOD at every quality level; write "
+                                   "OUT/report.md and report.json. Exit 1 if a case fails.")
     p.add_argument("--out", default="out/stability", help="output folder (default: "
                                                           "out/stability)")
     p.add_argument("--quick", action="store_true", help="leave out the 10-minute runs")
     p.add_argument("--solver", choices=("planar", "full", "both"), default="both",
                    help="planar: the LOD; full: the MuJoCo reference; both (default)")
+    p.add_argument("--quality", nargs="*", choices=("draft", "default", "final"),
+                   help="the LOD's quality levels to run (default: all three)")
     p.add_argument("--case", nargs="*", metavar="NAME",
                    help="only these cases (quote names with spaces): "
-                        f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the "
-                        "last two only without --quick)")
+                        f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the long "
+                        "ones (felling the big species, the crate, 10-minute runs) only without "
+                        "--quick)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_stability)
@@ -771,12 +785,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 # names listed in help pages without importing the heavy modules on every
 # start; tests/test_cli_errors.py checks them against accuracy.py and stress.py
-ACCURACY_SPECIES = ("sapling", "palm", "broadleaf", "conifer", "oak")
-ACCURACY_SCENARIOS = ("calm", "breeze", "gusty", "gale", "boxes", "explosion")
+ACCURACY_SPECIES = ("sapling", "palm", "broadleaf", "conifer", "birch", "oak", "spruce",
+                    "willow", "bamboo", "forest")
+ACCURACY_SCENARIOS = ("calm", "breeze", "gusty", "gale", "strong breeze", "boxes", "explosion")
 STABILITY_CASES = ("stiff x1", "stiff x100", "stiff x10000", "mass 1:10^2", "mass 1:10^4",
                    "cone 0.5 deg", "cone 5 deg", "cone 90 deg", "overlapping",
-                   "near-zero segments", "wind 45 m/s", "wind 70 m/s", "blast 2 kg at 6 m",
-                   "blast 50 kg at 5 m", "blast 500 kg at 6 m", "10 min gusty", "10 min calm")
+                   "near-zero segments", "1 mm between 1 m", "200-segment chain",
+                   "wind 45 m/s", "wind 70 m/s", "blast 2 kg at 6 m", "blast 50 kg at 5 m",
+                   "blast 500 kg at 6 m", "felling sapling", "felling spruce", "felling oak",
+                   "felling willow", "felling palm", "felling bamboo", "crate breaks a stem",
+                   "blast breaks branches", "tornado uproots", "10 min gusty", "10 min calm")
 
 EXAMPLES = {
     "derive": "  treebake derive sapling --stats-only              # a bundled grammar by name\n"

@@ -42,6 +42,7 @@ CONE_FRACTION = 0.9  # a hinge past this fraction of its cone leaves it (the con
 BREAK_MARGIN = 0.8  # a joint whose moment passes this fraction of its strength leaves it
 CONTACT_MARGIN = 0.05  # m: a tip this close to the ground (and below its rest height) leaves it
 BLAST_SPLIT = 8  # steps per step while a blast acts
+STEP_TURN = 0.3  # rad: the most a tree's first mode turns in one step
 
 
 @dataclass
@@ -59,6 +60,7 @@ class HandOff:
     q: np.ndarray
     v: np.ndarray
     reason: str
+    kind: str  # "turn", "cone" (large motion), "break", "ground", "cut" (events)
 
 
 @dataclass
@@ -77,8 +79,8 @@ class LinearStats:
 
 class LinearTier:
     """The linear tier for some trees of one quality. `pymunk_substeps`: the
-    pymunk tier's substeps per frame; the tier's own steps divide them, so a
-    tree can be handed over at any step."""
+    pymunk tier's substeps per frame (a tree handed over at a step starts
+    there at the substep at or before it)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  pymunk_substeps: int, log=None):
@@ -86,10 +88,13 @@ class LinearTier:
         self.log = log or (lambda msg: None)
         self.trees = list(trees)
         self.stats = LinearStats()
-        want = max(1, math.ceil(quality.linear_rate / scene.fps - 1e-9))
-        self.spf = min(d for d in range(1, pymunk_substeps + 1)
-                       if pymunk_substeps % d == 0 and (d >= want or d == pymunk_substeps))
-        self.ratio = pymunk_substeps // self.spf  # pymunk substeps per linear step
+        # steps: the quality's rate, or finer for a stiff tree, so that its
+        # first mode turns at most STEP_TURN per step (trapezoidal period
+        # error (omega h)^2 / 12: 0.75 %)
+        f1 = max((t.rig.first_frequency for t in trees), default=0.0)
+        self.spf = max(1, math.ceil(quality.linear_rate / scene.fps - 1e-9),
+                       math.ceil(2 * math.pi * f1 / (STEP_TURN * scene.fps) - 1e-9))
+        self.ratio = pymunk_substeps / self.spf  # pymunk substeps per linear step
         self.h = 1.0 / (scene.fps * self.spf)
         frames = scene.frame_count
         every = Bones.of(self.trees)
@@ -210,16 +215,19 @@ class LinearTier:
         kin, pose = self.state()
         bad = np.zeros(b.n, dtype=bool)
         why = np.full(b.n, "", dtype=object)
+        kind = np.full(b.n, "", dtype=object)
         turn = np.linalg.norm(kin[:, 0:3], axis=1)
         hinge = (np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1)
         near_break = model.bending_moment(q) > BREAK_MARGIN * b.strength
         tip = pose.pivot + apply(pose.rot, b.tip0 - b.pivot0)
         ground = (self.scene.ground & (tip[:, 2] < b.radius + CONTACT_MARGIN)
                   & (tip[:, 2] < self.tip_rest - 1e-3))
-        for mask, reason in ((turn > MAX_TURN, f"a bone turned past {MAX_TURN} rad"),
-                             (hinge, f"a hinge past {CONE_FRACTION:.0%} of its cone"),
-                             (near_break, f"a joint past {BREAK_MARGIN:.0%} of its strength"),
-                             (ground, "a tip reached the ground")):
+        for mask, reason, k in (
+                (near_break, f"a joint past {BREAK_MARGIN:.0%} of its strength", "break"),
+                (ground, "a tip reached the ground", "ground"),
+                (turn > MAX_TURN, f"a bone turned past {MAX_TURN} rad", "turn"),
+                (hinge, f"a hinge past {CONE_FRACTION:.0%} of its cone", "cone")):
+            kind[mask & (why == "")] = k
             why[mask & (why == "")] = reason
             bad |= mask
         leaving = {}
@@ -228,22 +236,25 @@ class LinearTier:
             tree = self.trees[i]
             hit = np.nonzero(bad[lo:hi])[0]
             if len(hit):
-                name, seg = self.locate(int(lo + hit[0]))
-                path = tree.rig.model.segment_paths()[seg]
-                leaving[ti_local] = f"{path}: {why[lo + hit[0]]}"
+                # an event (near breaking, at the ground) decides the engine before motion
+                events = hit[np.isin(kind[lo + hit], ("break", "ground"))]
+                first = int(lo + (events[0] if len(events) else hit[0]))
+                seg = self.locate(first)[1]
+                leaving[ti_local] = (f"{tree.rig.model.segment_paths()[seg]}: {why[first]}",
+                                     kind[first])
             elif tree.cut is not None and self.t + 0.5 * self.h >= tree.cut.time:
-                leaving[ti_local] = "its felling cut"
+                leaving[ti_local] = ("its felling cut", "cut")
         if not leaving:
             return []
         out = []
         rot_exact, _ = pose_frames(b, q[None])
-        for ti_local, reason in leaving.items():
+        for ti_local, (reason, why_kind) in leaving.items():
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
             i = self.members[ti_local]
             self.last_frame[i] = math.ceil(self.step / self.spf) - 1
-            out.append(HandOff(i, self.step * self.ratio, self.t, rot_exact[0, lo:hi].copy(),
+            out.append(HandOff(i, int(self.step * self.ratio), self.t, rot_exact[0, lo:hi].copy(),
                                kin[lo:hi, 6:9].copy(), q[2 * lo:2 * hi].copy(),
-                               self.v[2 * lo:2 * hi].copy(), reason))
+                               self.v[2 * lo:2 * hi].copy(), reason, why_kind))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
             if keep else np.zeros(0, dtype=np.int64)

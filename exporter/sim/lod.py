@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
+from ..errors import SimulationError
 from ..scene import Scene
 from .quality import Quality
 from .common import SimTree, TreeMotion
@@ -98,6 +99,18 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     frames = scene.frame_count
     substeps = max(1, round(quality.substep_rate / scene.fps))  # the pymunk tier's per frame
     engine = "pymunk" if quality.tier == "pymunk" else nonlinear_engine(quality)
+
+    def engine_for(kind: str) -> str:
+        """Events (a cut, a joint near breaking, a tip at the ground, a
+        projectile) go to the pymunk tier, robust at every step; large motion
+        in the wind to the reference when it is the engine: its hinges are
+        the linear tier's coordinates, and at a coarse step it beats pymunk
+        there (out/accuracy)."""
+        if engine == "reference" and quality.nonlinear == "auto" and \
+                kind not in ("turn", "cone"):
+            return "pymunk"
+        return engine
+
     if quality.tier == "pymunk":
         in_nonlinear = [True] * len(trees)
     else:
@@ -107,29 +120,30 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     lin = LinearTier([trees[i] for i in lin_idx], scene, quality, loads, substeps, log) \
         if lin_idx else None
     pym: list[tuple[PymunkTier, list[int]]] = []
-    ref_runs: list[tuple[list[int], float, tuple | None]] = []  # (trees, start s, (q, v))
+    ref_runs: list[tuple] = []  # (trees, start s, (q, v) or None, the HandOff or None)
     first = [i for i, p in enumerate(in_nonlinear) if p]
-    if first and engine == "pymunk":
+    if first and engine_for("projectile") == "pymunk":
         tier = PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
         tier.begin()
         pym.append((tier, first))
     elif first:
-        ref_runs.append((first, 0.0, None))
-    uses = [TierUse(engine if p else "linear") for p in in_nonlinear]
+        ref_runs.append((first, 0.0, None, None))
+    uses = [TierUse(engine_for("projectile") if p else "linear") for p in in_nonlinear]
     handed: list = []
     for f in range(1, frames):
         if lin is not None:
             for ho in lin.advance_frame(f):
                 i = lin_idx[ho.tree]
-                if engine == "pymunk":
+                to = engine_for(ho.kind)
+                if to == "pymunk":
                     tier = PymunkTier([trees[i]], scene, quality, loads, log=log)
                     tier.begin(ho.substep, StartState(ho.rot, ho.omega))
                     pym.append((tier, [i]))
                 else:  # the reference's hinges are the linear tier's coordinates
-                    ref_runs.append(([i], ho.time, (ho.q, ho.v)))
-                uses[i] = TierUse(f"linear, then {engine}", round(ho.time, 6), ho.reason)
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho))
+                uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason)
                 handed.append(Event(ho.time, trees[i].name, TIER, "",
-                                    f"to {engine}: {ho.reason}"))
+                                    f"to {to}: {ho.reason}"))
                 log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
                     f"({ho.reason})")
         for tier, _ in pym:
@@ -160,12 +174,29 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             take(i, m, start)
     objects = None
     ref_stats = []
-    for members, t0, state in ref_runs:
+    for members, t0, state, ho in ref_runs:
         from .reference import ReferenceSolver
 
         ref = ReferenceSolver([trees[i] for i in members], scene, quality, loads, log=log,
                               timestep=quality.reference_step)
-        result = ref.run(None, t0, state)
+        try:
+            result = ref.run(None, t0, state)
+        except SimulationError as exc:
+            if ho is None:
+                raise
+            # the reference at a coarse step could not hold it: pymunk takes the hand-off
+            log(f"{trees[members[0]].name}: the reference failed ({exc}); the pymunk tier "
+                "takes it from the hand-over")
+            tier = PymunkTier([trees[members[0]]], scene, quality, loads, log=log)
+            tier.begin(ho.substep, StartState(ho.rot, ho.omega))
+            for f in range(math.ceil(ho.substep / tier.spf - 1e-9), frames):
+                tier.advance_frame(f)
+            pym.append((tier, members))
+            start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
+            take(members[0], tier.motions()[0], start)
+            uses[members[0]] = TierUse("linear, then pymunk", uses[members[0]].switch,
+                                       uses[members[0]].reason + "; the reference failed")
+            continue
         ref_stats.append(result)
         start = math.ceil(round(t0 / ref.h) / ref.spf - 1e-9)
         for i in members:

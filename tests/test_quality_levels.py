@@ -1,0 +1,57 @@
+"""Every quality level against the Euler-Bernoulli cantilever: the first
+frequency of a stem of N segments must approach the beam's as N grows, for
+green wood and for wood 10^4 times stiffer (an independent, analytic truth)."""
+
+import math
+
+import pytest
+from simkit import BARE, bake_text, tip
+
+from treebake.sim.quality import QUALITIES
+from treebake.sway import frequency
+
+E, RHO = 8.0e9, 800.0  # green wood, Pa and kg/m^3
+LENGTH, DIAMETER = 5.0, 0.1  # m
+
+
+def grammar(n: int, stiffer: float) -> str:
+    ei = E * stiffer * math.pi * DIAMETER**4 / 64  # N m^2, set directly (@ei) when stiffer
+    stiff = f"@ei({ei:.6g})" if stiffer != 1.0 else ""
+    return (f"density: {RHO}\nmodulus: {E}\ndamping: 0\n{BARE}iterations: {n}\n"
+            f"axiom: {stiff}!({DIAMETER})A({n})\nA(n) : n > 0 -> F({LENGTH}/{n})A(n-1)\n")
+
+
+def beam_f1(stiffer: float) -> float:
+    ei = E * stiffer * math.pi * DIAMETER**4 / 64
+    mass_per_length = RHO * math.pi * DIAMETER**2 / 4
+    return 0.5596 * math.sqrt(ei / (mass_per_length * LENGTH**4))
+
+
+def f1_error(tmp_path, level: str, n: int, stiffer: float) -> float:
+    f_beam = beam_f1(stiffer)
+    fps = min(1000.0, max(120.0, 12 * f_beam))  # frames resolve the oscillation
+    duration = 1.0 + 12 / f_beam
+    force = 20.0 * stiffer**0.5  # a small pull: the linear range
+    bake = bake_text(tmp_path, grammar(n, stiffer), duration=duration, fps=fps, gravity=0.0,
+                     quality=level, pull=[{"tree": 0, "force": [force, 0, 0], "release": 1.0,
+                                           "at": 1.0}])
+    t, x = bake.times, tip(bake.trees[0])[:, 0]
+    free = t > 1.0 + 2 / fps
+    assert abs(x[free]).max() > 1e-4  # it moved
+    return frequency(t[free], x[free]) / f_beam - 1
+
+
+@pytest.mark.parametrize("level", list(QUALITIES))
+@pytest.mark.parametrize("stiffer", [1.0, 1e4])
+def test_cantilever_f1_converges_as_bones_are_added(tmp_path, level, stiffer):
+    errors = {n: f1_error(tmp_path, level, n, stiffer) for n in (10, 20, 40)}
+    bones = {n: min(n, math.ceil(1 / max(QUALITIES[level].bone_length, 1 / n))) for n in errors}
+    limit = 0.01 if stiffer == 1.0 else 0.03
+    for n, err in errors.items():
+        if bones[n] >= 20:  # the level's bones are that fine
+            assert abs(err) < limit, (n, errors)
+    # more bones never make it worse (a stability rule that scaled inertia
+    # with stiffness did: -0.5 % at 20 bones, -1.9 % at 40)
+    finer = [errors[n] for n in (10, 20, 40) if bones[n] == n]
+    for a, b in zip(finer, finer[1:]):
+        assert abs(b) <= abs(a) + 1e-3, errors
