@@ -64,6 +64,7 @@ class ChainEvents:
         self.stats.broken += 1
         freed = self._outboard(bone)
         if self.parent[bone] < 0:  # uprooted
+            self._free_rigid_motion(bone)
             self._rigid_lumps(int(self.bone_tree[bone]))
         if self.bone_frame[bone] < 0:
             for k in range(self.planes_of_bone[bone]):
@@ -77,6 +78,14 @@ class ChainEvents:
         else:
             self._to_debris(freed, pose)
         self._unload(freed)
+
+    def _free_rigid_motion(self, root: int, planes: tuple[int, ...] = (0, 1)) -> None:
+        """A root chain whose root joint is cut or gone turns freely as a
+        whole: its structural damping acts relative to that turn (forces.py)."""
+        for b in self.chain_bones[self.bone_chain[root]]:
+            for k in planes:
+                if k < self.planes_of_bone[b]:
+                    self.rigid_root[self.body_of[(int(b), k)]] = self.body_of[(root, k)]
 
     def _fall_plane(self, bones: np.ndarray) -> None:
         """A stem that falls free turns through a large angle: two planes
@@ -224,6 +233,8 @@ class ChainEvents:
                     self._nudge(b, FELL_NUDGE)
                 self.read()
                 self.add_tree_work(ti, self._kinetic(ti) - before)  # the feller's push
+                for b in roots:
+                    self._free_rigid_motion(b, planes=(0,))
                 self.cut_state[ti] = "hinged"
                 self.events.append(Event(t, tree.name, CUT, self.bone_path(roots[0]),
                                          "the hinge holds"))

@@ -98,17 +98,41 @@ class ChainForces:
         # structural damping on the motion relative to the frame (pymunk's
         # velocities): C = alpha M, as an exact decay over the interval, so
         # that stiff, fast limbs can never overshoot
-        s = self.state
         decay = -np.expm1(-self.body_alpha * dt) / dt
-        fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * s[:, 3]
-        fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * s[:, 4]
-        tz = (t_loc * self.body_n).sum(1) - decay * self.i_eff * s[:, 5]
+        rel = self._bending_velocity()
+        fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * rel[:, 0]
+        fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * rel[:, 1]
+        tz = (t_loc * self.body_n).sum(1) - decay * self.i_eff * rel[:, 2]
         out = self.force_rows
         out[:] = 0.0
         live = self.in_space
         out[self.live_rows, 0] = fx[live]
         out[self.live_rows, 1] = fy[live]
         out[self.live_rows, 2] = tz[live]
+
+    def _bending_velocity(self) -> np.ndarray:
+        """Each body's velocity (vx, vy, w) that structural damping acts on:
+        relative to its frame, and in a chain whose root joint is cut or gone
+        (a felled or uprooted stem), relative to the chain turning rigidly
+        about its root as well: wood damps bending, not a stem's fall."""
+        s = self.state
+        out = s[:, 3:6].copy()
+        free = np.nonzero(self.rigid_root >= 0)[0]
+        if len(free):
+            r = self.rigid_root[free]
+
+            def cog(i):
+                c, sn = np.cos(s[i, 2]), np.sin(s[i, 2])
+                arm = self.cog2d0[i] - self.q0[i]
+                return s[i, 0:2] + np.stack([c * arm[:, 0] - sn * arm[:, 1],
+                                             sn * arm[:, 0] + c * arm[:, 1]], 1)
+
+            w = s[r, 5]
+            lever = cog(free) - cog(r)  # from the root's COG: v = v_root + w x lever
+            out[free, 0] -= s[r, 3] - w * lever[:, 1]
+            out[free, 1] -= s[r, 4] + w * lever[:, 0]
+            out[free, 2] -= w
+        return out
 
     def _debris_loads(self, t: float, com: np.ndarray, vcom: np.ndarray, axis: np.ndarray,
                       dt: float) -> np.ndarray:

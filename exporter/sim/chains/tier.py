@@ -156,6 +156,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.in_debris = np.zeros(n, dtype=bool)
         self.breakable = np.isfinite(self.strength[self.body_bone])
         self.pivot_alive = np.ones(len(self.bodies), dtype=bool)
+        self.rigid_root = np.full(len(self.bodies), -1, dtype=np.int64)
         self.still_time = np.zeros(len(self.trees))
         self.quiet = self._quiet_times()
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
