@@ -112,6 +112,7 @@ class Wind:
             np.stack([synthesize(rng, count, dt, s, length, self.speed) for s, length in comps],
                      axis=-1)
             for _ in range(lanes)])  # (lanes, count, 3)
+        self._pairs = np.concatenate([self._series[:-1], self._series[1:]], axis=2)
         self._dt = dt
 
     def mean_speed(self, z: np.ndarray) -> np.ndarray:
@@ -133,27 +134,33 @@ class Wind:
         scale = self.ramp_factor(t)
         if scale == 0.0:
             return np.zeros_like(points)
-        u = self.mean_speed(points[:, 2])[:, None] * self.direction
-        if self._series is not None:
-            along = points @ self.direction - self._along0
-            tau = (t + 5.0) - along / self.speed  # frozen turbulence: gusts move downwind
-            pos = tau / self._dt
-            i0 = np.floor(pos).astype(np.int64)
-            w = (pos - i0)[:, None]
-            count = self._series.shape[1]
-            i0 %= count
-            i1 = (i0 + 1) % count
-            lane_pos = (points @ self.cross - self._cross0) / self._lane
-            l0 = np.clip(np.floor(lane_pos).astype(np.int64), 0, self._series.shape[0] - 2)
-            # independent lanes blended with cos/sin weights, which keeps the
-            # variance (linear weights would lower it by up to half between lanes)
-            lw = np.clip(lane_pos - l0, 0.0, 1.0)[:, None] * (np.pi / 2)
-            s = self._series
-            fluct = (np.cos(lw) * ((1 - w) * s[l0, i0] + w * s[l0, i1])
-                     + np.sin(lw) * ((1 - w) * s[l0 + 1, i0] + w * s[l0 + 1, i1]))
-            u = u + (fluct[:, 0:1] * self.direction + fluct[:, 1:2] * self.cross
-                     + fluct[:, 2:3] * np.array([0.0, 0.0, 1.0]))
-        return scale * u
+        along_u = self.mean_speed(points[:, 2])
+        out = np.empty_like(points)
+        if self._series is None:
+            out[:] = (scale * along_u)[:, None] * self.direction
+            return out
+        along = points @ self.direction - self._along0
+        pos = ((t + 5.0) - along / self.speed) / self._dt  # frozen turbulence: gusts move downwind
+        start = np.floor(pos)
+        w = (pos - start)[:, None]
+        count = self._series.shape[1]
+        i0 = start.astype(np.int64) % count
+        i1 = (i0 + 1) % count
+        lane_pos = (points @ self.cross - self._cross0) / self._lane
+        l0 = np.clip(np.floor(lane_pos).astype(np.int64), 0, self._series.shape[0] - 2)
+        # independent lanes blended with cos/sin weights, which keeps the
+        # variance (linear weights would lower it by up to half between lanes);
+        # a lane and the next are stored side by side, so two gathers fetch both
+        lw = np.clip(lane_pos - l0, 0.0, 1.0) * (np.pi / 2)
+        a = self._pairs[l0, i0]
+        mix = a + w * (self._pairs[l0, i1] - a)  # (N, 6): lane, next lane
+        fluct = np.cos(lw)[:, None] * mix[:, 0:3] + np.sin(lw)[:, None] * mix[:, 3:6]
+        out[:] = (along_u + fluct[:, 0])[:, None] * self.direction \
+            + fluct[:, 1:2] * self.cross
+        out[:, 2] += fluct[:, 2]
+        if scale != 1.0:
+            out *= scale
+        return out
 
 
 # ---------------------------------------------------------------------------

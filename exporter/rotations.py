@@ -29,6 +29,44 @@ def matrices_from_rotvec(rho: np.ndarray) -> np.ndarray:
     return r
 
 
+def rotation_rows(rho: np.ndarray) -> np.ndarray:
+    """Rotation matrices (3, 3, N) from rotation vectors (3, N): the
+    structure-of-arrays form of matrices_from_rotvec (each entry a
+    contiguous row, several times faster on small vectors)."""
+    x, y, z = rho
+    t2 = x * x + y * y + z * z
+    theta = np.sqrt(t2)
+    small = theta < 1e-8
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - t2 / 6, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - t2 / 24, (1 - np.cos(safe)) / (safe * safe))
+    ax, ay, az = a * x, a * y, a * z
+    bx = b * x
+    by = b * y
+    r = np.empty((3, 3) + x.shape)
+    r[0, 0] = 1 - b * (t2 - x * x)
+    r[0, 1] = bx * y - az
+    r[0, 2] = bx * z + ay
+    r[1, 0] = bx * y + az
+    r[1, 1] = 1 - b * (t2 - y * y)
+    r[1, 2] = by * z - ax
+    r[2, 0] = bx * z - ay
+    r[2, 1] = by * z + ax
+    r[2, 2] = 1 - b * (x * x + y * y)
+    return r
+
+
+def turn_rows(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """r v for matrices (3, 3, N) and vectors (3, N): (3, N)."""
+    return r[:, 0] * v[0] + r[:, 1] * v[1] + r[:, 2] * v[2]
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for vectors as rows (3, N)."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross products of (..., 3) arrays (several times faster than np.cross,
     which dominates small per-update workloads)."""

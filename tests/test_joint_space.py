@@ -45,8 +45,8 @@ def test_mass_matrix_is_the_bones_kinetic_energy(js):
     kin = js.kinematics(np.zeros(js.n), v)
     pose = js.pose(kin, np.zeros(js.n))
     b = js.bones
-    omega = kin[:, 6:9]
-    energy = 0.5 * (b.mass * (pose.vcom**2).sum(1)).sum() + 0.5 * np.einsum(
+    omega = kin[6:9].T
+    energy = 0.5 * (b.mass * (pose.vcom**2).sum(0)).sum() + 0.5 * np.einsum(
         "bi,bij,bj->", omega, b.inertia, omega)
     assert 0.5 * v @ mass @ v == pytest.approx(energy, rel=1e-12)
 
@@ -60,8 +60,8 @@ def test_loads_do_the_work_of_the_forces(js):
     kin = js.kinematics(zero, v)
     pose = js.pose(kin, zero)
     _, damping, _ = js.dense()
-    tau = js.rhs(force, kin, pose, zero) + js.hold + damping @ v
-    assert tau @ v == pytest.approx((force * pose.vcom).sum(), rel=1e-10)
+    tau = js.rhs(force.T, kin, pose, zero) + js.hold + damping @ v
+    assert tau @ v == pytest.approx((force * pose.vcom.T).sum(), rel=1e-10)
 
 
 def test_damping_is_each_limbs_block_of_the_mass_matrix(js):
@@ -84,7 +84,7 @@ def test_tangent_stiffness_is_the_derivative_of_the_right_hand_side(js):
 
     def rhs(q):
         kin = js.kinematics(q, zero)
-        return js.rhs(gravity, kin, js.pose(kin, q), q)
+        return js.rhs(gravity.T, kin, js.pose(kin, q), q)
 
     assert np.abs(rhs(zero)).max() < 1e-9 * np.abs(js.hold).max()  # prestress: at rest
     _, _, stiffness = js.dense()
@@ -93,6 +93,23 @@ def test_tangent_stiffness_is_the_derivative_of_the_right_hand_side(js):
         d = rng.normal(size=js.n) * 1e-6
         num = -(rhs(d) - rhs(-d)) / 2
         assert np.allclose(num, stiffness @ d, rtol=1e-4, atol=1e-5 * np.abs(stiffness @ d).max())
+
+
+def test_energy_is_the_bones_and_the_springs(js):
+    """JointSpace.energy against its parts computed here: the bones' kinetic
+    energy (as above), their weight above z = 0 and (k q + hold)^2 / 2k."""
+    rng = np.random.default_rng(7)
+    q, v = rng.normal(size=js.n) * 1e-3, rng.normal(size=js.n)
+    kin = js.kinematics(q, v)
+    pose = js.pose(kin, q)
+    b = js.bones
+    mass, _, _ = js.dense()
+    kinetic = 0.5 * v @ mass @ v  # first-order velocities: the mass matrix at rest
+    weight = (b.mass * 9.81 * pose.com[2]).sum()
+    springs = (0.5 * (js.k_spring * q + js.hold) ** 2 / js.k_spring).sum()
+    got = js.energy(kin, pose, q, 9.81).sum()
+    # the spin uses the turned inertia R I R^T, the mass matrix the rest one: q ~ 1e-3
+    assert got == pytest.approx(kinetic + weight + springs, rel=1e-6)
 
 
 def test_factor_solves_the_implicit_matrix(js):
@@ -125,14 +142,14 @@ def test_tree_sums_and_factor_on_a_random_tree():
     n = len(parent)
     chain_parent = np.array([parent[c[0]] for c in chains])
     sums = ChainSums(chains, chain_parent, np.array(level), n)
-    x = rng.normal(size=(n, 2))
+    x = rng.normal(size=(2, n))
     pre, suf = x.copy(), x.copy()
     for j in range(n):
         if parent[j] >= 0:
-            pre[j] += pre[parent[j]]
+            pre[:, j] += pre[:, parent[j]]
     for j in range(n - 1, -1, -1):
         if parent[j] >= 0:
-            suf[parent[j]] += suf[j]
+            suf[:, parent[j]] += suf[:, j]
     assert np.allclose(sums.prefix(x), pre)
     assert np.allclose(sums.suffix(x), suf)
     depth = depths(parent)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..rotations import cross, matrices_from_rotvec
+from ..rotations import cross, cross_rows, rotation_rows, turn_rows
 from .common import Bones
 from .layout import ChainLayout
 from .treefactor import TreeFactor, ancestor_table, depths
@@ -44,16 +44,17 @@ from .treesums import ChainSums
 
 @dataclass
 class Pose:
-    """Bones' pose (first order in the angles for velocities): rotation
-    relative to rest (B, 3, 3), pivot, COM, COM velocity, unit axis (B, 3),
-    and the current axes of every dof's hinge (2B, 3)."""
+    """Bones' pose as rows (first order in the angles for velocities):
+    rotation relative to rest (3, 3, B), pivot, COM, COM velocity, unit
+    axis, and the current axes of each joint's two hinges (3, B)."""
 
     rot: np.ndarray
     pivot: np.ndarray
     com: np.ndarray
     vcom: np.ndarray
     axis: np.ndarray
-    hinge: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
 
 
 class JointSpace:
@@ -79,11 +80,11 @@ class JointSpace:
         sums = self.sums = ChainSums(layout.chain_bones, layout.chain_parent,
                                      layout.chain_depth, nb)
         m, c = bones.mass, bones.com0
-        s0 = sums.suffix(m[:, None])[:, 0]
-        s1 = sums.suffix(m[:, None] * c)
-        s2 = sums.suffix((m[:, None, None] * c[:, :, None] * c[:, None, :]).reshape(nb, 9)
-                         ).reshape(nb, 3, 3)
-        si = sums.suffix(bones.inertia.reshape(nb, 9)).reshape(nb, 3, 3)
+        s0 = sums.suffix(m[None, :])[0]
+        s1 = sums.suffix((m[:, None] * c).T).T
+        s2 = sums.suffix((m[:, None, None] * c[:, :, None] * c[:, None, :]).reshape(nb, 9).T
+                         ).T.reshape(nb, 3, 3)
+        si = sums.suffix(bones.inertia.reshape(nb, 9).T).T.reshape(nb, 3, 3)
         p = bones.pivot0[dof_bone]
         lever = s1[dof_bone] - s0[dof_bone][:, None] * p  # sum m (c - p_j) over a dof's subtree
         # every (upstream i, downstream j) pair, root-aligned: i = anc[j, t]
@@ -126,13 +127,16 @@ class JointSpace:
         self._factors: dict[tuple[float, float], TreeFactor] = {}
         self.factor = self.factor_for(c1, c2)
         self.mass_factor = self.factor_for(0.0, 0.0)
-        # constants of the products
-        self.cross_pivot = cross(self.axis, p)
-        self.per_hinge = np.concatenate([self.axis, self.cross_pivot], 1).reshape(nb, 2, 6)
-        self.second_turn = cross(bones.hinges[:, 0], bones.hinges[:, 1])  # d(hinge 1)/dq_0
+        # constants of the products (tree sums, no matrix is formed), as rows
+        # (structure of arrays): bone b's entries in column b
+        h = bones.hinges
+        cp = cross(self.axis, p).reshape(nb, 2, 3)
+        self.n0, self.n1 = h[:, 0].T.copy(), h[:, 1].T.copy()  # hinge axes (3, B)
+        self.cp0, self.cp1 = cp[:, 0].T.copy(), cp[:, 1].T.copy()  # n x p
+        self.second_turn = cross(h[:, 0], h[:, 1]).T.copy()  # d(hinge 1)/dq_0
         has = bones.parent >= 0
-        self.arm = bones.pivot0 - np.where(has[:, None], bones.pivot0[np.maximum(
-            bones.parent, 0)], 0.0)  # pivot from its parent's pivot, at rest
+        self.arm = (bones.pivot0 - np.where(has[:, None], bones.pivot0[np.maximum(
+            bones.parent, 0)], 0.0)).T.copy()  # pivot from its parent's pivot, at rest
         # damping: a bone's own mass plus the side chains hanging on it (its
         # subtree without the rest of its chain), moved by its limb alone
         nxt = np.full(nb, -1, dtype=np.int64)
@@ -144,25 +148,17 @@ class JointSpace:
         l1 = s1 - np.where(more[:, None], s1[nx], 0.0)
         l2 = s2 - np.where(more[:, None, None], s2[nx], 0.0)
         li = si - np.where(more[:, None, None], si[nx], 0.0)
-        self.lump = (l0, l1, np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3)
-                     - l2 + li)
-        self.axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
-        self.roots = np.nonzero(bones.parent < 0)[0]
-        self.parent_or_self = np.where(bones.parent >= 0, bones.parent, np.arange(nb))
-        # vectors turned by a bone's rotation (columns: COM arm, axis) and by
-        # its frame's (arm from the parent's pivot, the two hinges, and how
-        # the second hinge turns with the first)
-        self.rest_vecs = np.stack([bones.com0 - bones.pivot0, self.axis0], 2)
-        self.frame_vecs = np.stack([self.arm, bones.hinges[:, 0], bones.hinges[:, 1],
-                                    self.second_turn], 2)
-        c = bones.com0
-        zero = np.zeros(nb)
-        self.minus_skew_com = -np.stack([np.stack([zero, -c[:, 2], c[:, 1]], 1),
-                                         np.stack([c[:, 2], zero, -c[:, 0]], 1),
-                                         np.stack([-c[:, 1], c[:, 0], zero], 1)], 1)
+        spin = np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3) - l2 + li
+        self.lump = (l0, l1.T.copy(), spin.transpose(1, 2, 0).copy())
+        axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
+        self.axis0 = axis0.T.copy()
+        self.com_arm = (bones.com0 - bones.pivot0).T.copy()
+        self.com0 = bones.com0.T.copy()
+        self.inertia = bones.inertia.transpose(1, 2, 0).copy()  # (3, 3, B)
+        self.roots = np.nonzero(~has)[0]
+        self.parent_or_self = np.where(has, bones.parent, np.arange(nb))
         fr = layout.bone_frame
-        self.frame_row = np.where(fr >= 0, fr, nb)  # the frame bone's row, nb: the world
-        self.sign6 = np.array([1.0, 1, 1, -1, -1, -1])
+        self.frame_row = np.where(fr >= 0, fr, nb)  # the frame bone's column, nb: the world
 
     def factor_for(self, c1: float, c2: float) -> TreeFactor:
         """The factored M + c1 C + c2 K (cached)."""
@@ -191,42 +187,44 @@ class JointSpace:
     # products
 
     def kinematics(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Prefix sums (B, 12) down the tree of sum q n, sum q n x p, sum v n,
+        """Prefix sums (12, B) down the tree of sum q n, sum q n x p, sum v n,
         sum v n x p over each bone's hinges and all below it: its rotation
         vector, the terms its points move by, and their rates."""
-        ph = self.per_hinge  # (B, 2, 6)
-        own = np.empty((self.bones.n, 12))
-        own[:, 0:6] = q[0::2, None] * ph[:, 0] + q[1::2, None] * ph[:, 1]
-        own[:, 6:12] = v[0::2, None] * ph[:, 0] + v[1::2, None] * ph[:, 1]
+        q0, q1, v0, v1 = q[0::2], q[1::2], v[0::2], v[1::2]
+        own = np.empty((12, self.bones.n))
+        own[0:3] = q0 * self.n0 + q1 * self.n1
+        own[3:6] = q0 * self.cp0 + q1 * self.cp1
+        own[6:9] = v0 * self.n0 + v1 * self.n1
+        own[9:12] = v0 * self.cp0 + v1 * self.cp1
         return self.sums.prefix(own)
 
     def pose(self, kin: np.ndarray, q: np.ndarray) -> Pose:
-        """Bones' pose: rotations exp(rotation vector), pivots by summing
-        turned arms down the tree; COM velocities first order."""
-        rot = matrices_from_rotvec(kin[:, 0:3])
-        frame = rot[self.parent_or_self]
-        frame[self.roots] = np.eye(3)
-        turned = np.matmul(frame, self.frame_vecs)  # arm, hinge 0, hinge 1, d(hinge 1)/dq_0
-        own = np.matmul(rot, self.rest_vecs)  # COM arm, axis
-        pivot = self.sums.prefix(turned[:, :, 0])
-        com = pivot + own[:, :, 0]
-        vcom = np.matmul(self.minus_skew_com, kin[:, 6:9, None])[:, :, 0] - kin[:, 9:12]
-        hinge = np.empty((len(rot), 2, 3))
-        hinge[:, 0] = turned[:, :, 1]
-        hinge[:, 1] = turned[:, :, 2] + q[0::2, None] * turned[:, :, 3]
-        return Pose(rot, pivot, com, vcom, own[:, :, 1], hinge.reshape(-1, 3))
+        """Bones' pose (rows, (3, B) and (3, 3, B)): rotations exp(rotation
+        vector), pivots by summing turned arms down the tree; COM velocities
+        first order."""
+        rot = rotation_rows(kin[0:3])
+        frame = rot[:, :, self.parent_or_self]
+        frame[:, :, self.roots] = np.eye(3)[:, :, None]
+        pivot = self.sums.prefix(turn_rows(frame, self.arm))
+        com = pivot + turn_rows(rot, self.com_arm)
+        vcom = cross_rows(kin[6:9], self.com0) - kin[9:12]
+        first = turn_rows(frame, self.n0)
+        second = turn_rows(frame, self.n1 + q[0::2] * self.second_turn)
+        return Pose(rot, pivot, com, vcom, turn_rows(rot, self.axis0), first, second)
 
     def rhs(self, force: np.ndarray, kin: np.ndarray, pose: Pose, q: np.ndarray) -> np.ndarray:
-        """J(q)^T F - hold - C v - K_s q (N m per dof) for forces (B, 3) N at
+        """J(q)^T F - hold - C v - K_s q (N m per dof) for forces (3, B) N at
         the bones' COMs, gravity included."""
-        per_bone = np.empty((len(force), 6))
-        per_bone[:, 0:3] = force
-        per_bone[:, 3:6] = cross(pose.com, force)
+        per_bone = np.empty((6, self.bones.n))
+        per_bone[0:3] = force
+        per_bone[3:6] = cross_rows(pose.com, force)
         sub = self.sums.suffix(per_bone)
         # about each bone's pivot: sum c x F - p x sum F, then on its two hinges
-        moment = (sub[:, 3:6] - cross(pose.pivot, sub[:, 0:3]))[self.dof_bone]
-        loads = np.einsum("ij,ij->i", pose.hinge, moment)
-        return loads - self.hold - self.alpha * self.limb_momentum(kin) - self.k_spring * q
+        moment = sub[3:6] - cross_rows(pose.pivot, sub[0:3])
+        out = np.empty(self.n)
+        out[0::2] = (pose.first * moment).sum(0)
+        out[1::2] = (pose.second * moment).sum(0)
+        return out - self.hold - self.alpha * self.limb_momentum(kin) - self.k_spring * q
 
     def limb_momentum(self, kin: np.ndarray) -> np.ndarray:
         """M_LL v_L for every limb L, per dof: the limb's block of M times its
@@ -234,13 +232,27 @@ class JointSpace:
         chains on it, rigidly) by the bone's turn rate relative to the limb's
         frame; their moments about each hinge add up along the limb."""
         l0, l1, l2 = self.lump
-        rel = kin[:, 6:12] - np.concatenate([kin[:, 6:12], np.zeros((1, 6))])[self.frame_row]
-        w, lin = rel[:, 0:3], rel[:, 3:6]
-        per_bone = np.empty((len(w), 6))
-        per_bone[:, 0:3] = np.matmul(l2, w[:, :, None])[:, :, 0] - cross(l1, lin)
-        per_bone[:, 3:6] = cross(w, l1) - l0[:, None] * lin
-        sub = self.sums.chain_suffix(per_bone)[self.dof_bone]
-        return np.einsum("ij,ij->i", self.per_hinge.reshape(-1, 6), sub * self.sign6)
+        rates = kin[6:12]
+        rel = rates - np.concatenate([rates, np.zeros((6, 1))], 1)[:, self.frame_row]
+        w, lin = rel[0:3], rel[3:6]
+        per_bone = np.empty((6, self.bones.n))
+        per_bone[0:3] = turn_rows(l2, w) - cross_rows(l1, lin)
+        per_bone[3:6] = cross_rows(w, l1) - l0 * lin
+        sub = self.sums.chain_suffix(per_bone)
+        out = np.empty(self.n)
+        out[0::2] = (self.n0 * sub[0:3]).sum(0) - (self.cp0 * sub[3:6]).sum(0)
+        out[1::2] = (self.n1 * sub[0:3]).sum(0) - (self.cp1 * sub[3:6]).sum(0)
+        return out
+
+    def energy(self, kin: np.ndarray, pose: Pose, q: np.ndarray, g: float) -> np.ndarray:
+        """Each bone's kinetic, gravitational (above z = 0) and spring energy
+        (B,), J: velocities first order, with its true mass and inertia."""
+        b = self.bones
+        w = kin[6:9]
+        w_rest = (pose.rot * w[:, None]).sum(0)  # R^T w: the spin in the bone's rest frame
+        spin = (w_rest * turn_rows(self.inertia, w_rest)).sum(0)
+        return (0.5 * b.mass * (pose.vcom * pose.vcom).sum(0) + 0.5 * spin
+                + b.mass * g * pose.com[2] + self.spring_energy(q))
 
     def spring_energy(self, q: np.ndarray) -> np.ndarray:
         """Energy (B,) J the joint springs hold: (k q + hold)^2 / 2k per hinge."""

@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import apply, matrices_from_rotvec, quaternions_from_matrices
+from ..rotations import matrices_from_rotvec, quaternions_from_matrices
 from ..scene import Scene
-from .audit import Ledger, LoadWork, bone_energy, per_tree
+from .audit import Ledger, LoadWork, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
 from .joint_space import JointSpace
 from .layout import ChainLayout
@@ -132,6 +132,9 @@ class LinearTier:
         self.a = self.model.mass_factor.solve(self.rhs(self.t, self.q, self.v))
         self.cone = np.repeat(b.cone, 2)
         self.tip_rest = b.tip0[:, 2]
+        self.cut_time = np.array([trees[k].cut.time if trees[k].cut is not None else np.inf
+                                  for k in range(len(trees))])
+        self.tip_arm = (b.tip0 - b.pivot0).T.copy()
         self.stats.build_seconds += time.perf_counter() - t0
         self.stats.dofs = max(self.stats.dofs, n)
 
@@ -148,16 +151,17 @@ class LinearTier:
         pose = model.pose(kin, q)
         dt = self.h if dt is None else dt
         # blasts: the impulse within this step, which ends at t
-        force = self.loads.forces(t, pose.com, pose.vcom, pose.axis, b.props,
+        com = pose.com.T
+        force = self.loads.forces(t, com, pose.vcom.T, pose.axis.T, b.props,
                                   include_gravity=False, dt=dt, blast_start=t - dt)
         pulls = b.pull_forces(t)
         if pulls is not None:
             force += pulls
         force = cap_loads(force, b.mass, t, self.stats, self.locate, dt)
         if record:
-            self.ledger.add_work(self._per_tree(self.load_work.update(force, pose.com)))
+            self.ledger.add_work(self._per_tree(self.load_work.update(force, com)))
         force += b.mass[:, None] * self.loads.g
-        return model.rhs(force, kin, pose, q)
+        return model.rhs(np.ascontiguousarray(force.T), kin, pose, q)
 
     # ------------------------------------------------------------------
     # running
@@ -213,47 +217,44 @@ class LinearTier:
         """Trees that left the linear range this step, handed over."""
         model, b, q = self.model, self.bones, self.q
         kin, pose = self.state()
-        bad = np.zeros(b.n, dtype=bool)
-        why = np.full(b.n, "", dtype=object)
-        kind = np.full(b.n, "", dtype=object)
-        turn = np.linalg.norm(kin[:, 0:3], axis=1)
-        hinge = (np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1)
-        near_break = model.bending_moment(q) > BREAK_MARGIN * b.strength
-        tip = pose.pivot + apply(pose.rot, b.tip0 - b.pivot0)
-        ground = (self.scene.ground & (tip[:, 2] < b.radius + CONTACT_MARGIN)
-                  & (tip[:, 2] < self.tip_rest - 1e-3))
-        for mask, reason, k in (
-                (near_break, f"a joint past {BREAK_MARGIN:.0%} of its strength", "break"),
-                (ground, "a tip reached the ground", "ground"),
-                (turn > MAX_TURN, f"a bone turned past {MAX_TURN} rad", "turn"),
-                (hinge, f"a hinge past {CONE_FRACTION:.0%} of its cone", "cone")):
-            kind[mask & (why == "")] = k
-            why[mask & (why == "")] = reason
-            bad |= mask
+        tip_z = pose.pivot[2] + (pose.rot[2] * self.tip_arm).sum(0)
+        # in order of precedence: an event (near breaking, at the ground)
+        # decides the engine before large motion does
+        checks = (
+            (model.bending_moment(q) > BREAK_MARGIN * b.strength, "break",
+             f"a joint past {BREAK_MARGIN:.0%} of its strength"),
+            (self.scene.ground & (tip_z < b.radius + CONTACT_MARGIN)
+             & (tip_z < self.tip_rest - 1e-3), "ground", "a tip reached the ground"),
+            ((kin[0:3] * kin[0:3]).sum(0) > MAX_TURN**2, "turn",
+             f"a bone turned past {MAX_TURN} rad"),
+            ((np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1), "cone",
+             f"a hinge past {CONE_FRACTION:.0%} of its cone"))
+        bad = checks[0][0] | checks[1][0] | checks[2][0] | checks[3][0]
         leaving = {}
-        for ti_local, i in enumerate(self.members):
-            lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
-            tree = self.trees[i]
-            hit = np.nonzero(bad[lo:hi])[0]
-            if len(hit):
-                # an event (near breaking, at the ground) decides the engine before motion
-                events = hit[np.isin(kind[lo + hit], ("break", "ground"))]
-                first = int(lo + (events[0] if len(events) else hit[0]))
+        cut = self.cut_time <= self.t + 0.5 * self.h
+        if bad.any() or cut.any():
+            hit_tree = np.bincount(b.bone_tree, bad, minlength=len(self.members)) > 0
+            for ti_local in np.nonzero(hit_tree | cut)[0]:
+                tree = self.trees[self.members[ti_local]]
+                if not hit_tree[ti_local]:
+                    leaving[ti_local] = ("its felling cut", "cut")
+                    continue
+                lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
+                mask, kind, why = next(c for c in checks if c[0][lo:hi].any())
+                first = int(lo + np.argmax(mask[lo:hi]))
                 seg = self.locate(first)[1]
-                leaving[ti_local] = (f"{tree.rig.model.segment_paths()[seg]}: {why[first]}",
-                                     kind[first])
-            elif tree.cut is not None and self.t + 0.5 * self.h >= tree.cut.time:
-                leaving[ti_local] = ("its felling cut", "cut")
+                leaving[ti_local] = (f"{tree.rig.model.segment_paths()[seg]}: {why}", kind)
         if not leaving:
             return []
         out = []
         rot_exact, _ = pose_frames(b, q[None])
         for ti_local, (reason, why_kind) in leaving.items():
+            ti_local = int(ti_local)
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
             i = self.members[ti_local]
             self.last_frame[i] = math.ceil(self.step / self.spf) - 1
             out.append(HandOff(i, int(self.step * self.ratio), self.t, rot_exact[0, lo:hi].copy(),
-                               kin[lo:hi, 6:9].copy(), q[2 * lo:2 * hi].copy(),
+                               kin[6:9, lo:hi].T.copy(), q[2 * lo:2 * hi].copy(),
                                self.v[2 * lo:2 * hi].copy(), reason, why_kind))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
@@ -278,9 +279,7 @@ class LinearTier:
             return
         model = self.model
         kin, pose = self.state()
-        e = bone_energy(b.mass, b.inertia, pose.rot, pose.com, pose.vcom, kin[:, 6:9],
-                        -self.loads.g[2])
-        e += model.spring_energy(self.q)
+        e = model.energy(kin, pose, self.q, -self.loads.g[2])
         energy = np.full(len(self.trees), np.nan)
         energy[self.members] = per_tree(e, b.bone_tree, len(self.members))
         self.ledger.record(f, energy)
