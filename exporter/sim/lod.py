@@ -95,6 +95,7 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
 
 def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                     extent: np.ndarray, log=None, progress=None) -> ChunkResult:
+    log = log or (lambda msg: None)
     loads = SceneLoads(scene, extent)
     frames = scene.frame_count
     substeps = max(1, round(quality.substep_rate / scene.fps))  # the pymunk tier's per frame
