@@ -208,35 +208,38 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
             bone_limb.append(li)
     n = len(bone_segs)
     pts = model.points
-    bone_parent = np.empty(n, dtype=np.int64)
-    pivot = np.empty((n, 3))
-    tip = np.empty((n, 3))
-    mass = np.empty(n)
-    com = np.empty((n, 3))
-    inertia = np.empty((n, 3, 3))
-    radius = np.empty(n)
-    wood_area = np.empty(n)
-    leaf_area = np.empty(n)
-    bone_c = np.empty(n)
-    for b, segs in enumerate(bone_segs):
-        first = segs[0]
-        ps = model.seg_parent[first]
-        bone_parent[b] = seg_bone[ps] if ps >= 0 else -1
-        pivot[b] = pts[model.seg_start[first]]
-        tip[b] = pts[model.seg_end[segs[-1]]]
-        idx = np.asarray(segs)
-        m = seg_mass[idx]
-        mids = 0.5 * (pts[model.seg_start[idx]] + pts[model.seg_end[idx]])
-        mass[b] = m.sum()
-        com[b] = (m[:, None] * mids).sum(0) / mass[b] if mass[b] > 0 else mids.mean(0)
-        inertia[b] = _cylinders_inertia(m, mids, pts[model.seg_end[idx]] - pts[model.seg_start[idx]],
-                                        width[idx] / 2, com[b])
-        vol = area[idx] * seg_len[idx]
-        radius[b] = float((width[idx] / 2 * vol).sum() / vol.sum()) if vol.sum() > 0 else \
-            float(width[idx].mean() / 2)
-        wood_area[b] = float((width[idx] * seg_len[idx]).sum())
-        leaf_area[b] = float(leaf_area_seg[idx].sum())
-        bone_c[b] = float(compliance[idx].sum())
+    # per-segment quantities summed into bones (segments of a bone follow each other)
+    order = np.fromiter((s for segs in bone_segs for s in segs), dtype=np.int64,
+                        count=sum(len(segs) for segs in bone_segs))
+    of = seg_bone[order]
+
+    def per_bone(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(len(values), -1)
+        return np.stack([np.bincount(of, flat[:, k], minlength=n)
+                         for k in range(flat.shape[1])], 1).reshape((n,) + values.shape[1:])
+
+    first = np.array([segs[0] for segs in bone_segs], dtype=np.int64)
+    last = np.array([segs[-1] for segs in bone_segs], dtype=np.int64)
+    ps = model.seg_parent[first]
+    bone_parent = np.where(ps >= 0, seg_bone[np.maximum(ps, 0)], -1)
+    pivot = pts[model.seg_start[first]]
+    tip = pts[model.seg_end[last]]
+    m = seg_mass[order]
+    start, end = pts[model.seg_start[order]], pts[model.seg_end[order]]
+    mids = 0.5 * (start + end)
+    mass = per_bone(m)
+    count = np.bincount(of, minlength=n)
+    heavy = mass > 0
+    com = np.where(heavy[:, None], per_bone(m[:, None] * mids) / np.where(heavy, mass, 1.0)[:, None],
+                   per_bone(mids) / count[:, None])
+    inertia = per_bone(_cylinders_inertia(m, mids, end - start, width[order] / 2, com[of]))
+    vol = area[order] * seg_len[order]
+    total = per_bone(vol)
+    radius = np.where(total > 0, per_bone(width[order] / 2 * vol) / np.where(total > 0, total, 1.0),
+                      per_bone(width[order] / 2) / count)
+    wood_area = per_bone(width[order] * seg_len[order])
+    leaf_area = per_bone(leaf_area_seg[order])
+    bone_c = per_bone(compliance[order])
 
     limbs = []
     for chain, bones in zip(chains, groups):
@@ -271,7 +274,8 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
 
 
 def _cylinders_inertia(m, mids, vecs, radii, com) -> np.ndarray:
-    """Inertia tensor about `com` of solid cylinders (kg m^2)."""
+    """Inertia tensors (N, 3, 3) kg m^2 of solid cylinders (mass m, centre
+    mids, axis vecs, radius radii) about the points `com` (N, 3)."""
     lengths = np.linalg.norm(vecs, axis=1)
     axes = np.divide(vecs, lengths[:, None], out=np.zeros_like(vecs), where=lengths[:, None] > 0)
     i_axial = m * radii**2 / 2
@@ -281,17 +285,30 @@ def _cylinders_inertia(m, mids, vecs, radii, com) -> np.ndarray:
     own = i_trans[:, None, None] * (eye - outer) + i_axial[:, None, None] * outer
     d = mids - com
     shift = m[:, None, None] * ((d * d).sum(1)[:, None, None] * eye - d[:, :, None] * d[:, None, :])
-    return (own + shift).sum(0)
+    return own + shift
 
 
 def subtree_sums(parent: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Sum of `values` over each bone and all bones outboard of it."""
     out = np.array(values, dtype=float, copy=True)
-    for b in range(len(parent) - 1, -1, -1):
-        p = parent[b]
-        if p >= 0:
-            out[p] += out[b]
+    depth = np.zeros(len(parent), dtype=np.int64)
+    for b in range(len(parent)):  # parents first
+        if parent[b] >= 0:
+            depth[b] = depth[parent[b]] + 1
+    for d in range(int(depth.max()) if len(parent) else 0, 0, -1):  # deepest first
+        idx = np.nonzero(depth == d)[0]
+        np.add.at(out, parent[idx], out[idx])
     return out
+
+
+def path_sums(parent: np.ndarray, a: np.ndarray, b: np.ndarray, depth: np.ndarray):
+    """Each bone's values plus those of every bone below it, for two arrays."""
+    a, b = a.copy(), b.copy()
+    for d in range(1, int(depth.max()) + 1 if len(parent) else 0):  # root side first
+        idx = np.nonzero(depth == d)[0]
+        a[idx] += a[parent[idx]]
+        b[idx] += b[parent[idx]]
+    return a, b
 
 
 def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
@@ -321,6 +338,10 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
     msum = subtree_sums(parent, rig.mass)
     mcsum = subtree_sums(parent, rig.mass[:, None] * rig.com)
     n_limbs = len(rig.limbs)
+    depth = np.zeros(n, dtype=np.int64)
+    for b in range(n):  # parents first
+        if parent[b] >= 0:
+            depth[b] = depth[parent[b]] + 1
     directions = np.eye(3)
     first = np.asarray([limb.bones[0] for limb in rig.limbs])
     last = np.asarray([limb.bones[-1] for limb in rig.limbs])
@@ -331,12 +352,8 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
         load = g * direction
         moment = np.cross(mcsum - msum[:, None] * rig.pivot, load)  # N m at each joint
         rho = moment / rig.k[:, None]  # joint rotation vectors, rad
-        a = np.zeros_like(rho)
-        bsum = np.zeros_like(rho)
-        for b in range(n):
-            p = parent[b]
-            a[b] = rho[b] + (a[p] if p >= 0 else 0.0)
-            bsum[b] = np.cross(rho[b], rig.pivot[b]) + (bsum[p] if p >= 0 else 0.0)
+        # sums down the tree: each bone's rotation and its points' offset term
+        a, bsum = path_sums(parent, rho, np.cross(rho, rig.pivot), depth)
         a_base = np.where(base[:, None] >= 0, a[np.maximum(base, 0)], 0.0)
         b_base = np.where(base[:, None] >= 0, bsum[np.maximum(base, 0)], 0.0)
         rot = a[pb] - a_base  # bone rotation relative to the fixed base

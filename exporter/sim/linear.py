@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import matrices_from_rotvec, quaternions_from_matrices
+from ..rotations import compose_rows, quaternions_from_matrices, rotation_rows, turn_rows
 from ..scene import Scene
 from .audit import Ledger, LoadWork, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
@@ -97,9 +97,9 @@ class LinearTier:
         self.ratio = pymunk_substeps / self.spf  # pymunk substeps per linear step
         self.h = 1.0 / (scene.fps * self.spf)
         frames = scene.frame_count
-        every = Bones.of(self.trees)
-        self.tree_bones = [every.tree(i) for i in range(len(self.trees))]
-        self.angles = [np.zeros((frames, 2 * b.n)) for b in self.tree_bones]
+        self.every = Bones.of(self.trees)
+        counts = np.diff(self.every.offsets)
+        self.angles = [np.zeros((frames, 2 * int(c))) for c in counts]
         self.last_frame = np.full(len(self.trees), frames - 1)  # last frame each tree spent here
         self.members = list(range(len(self.trees)))
         self.ledger = Ledger(frames, len(self.trees))
@@ -286,19 +286,19 @@ class LinearTier:
 
     def motions(self) -> list[TreeMotion]:
         """Per tree, the motion of the frames it spent in this tier (others zero)."""
-        out = []
         frames = self.scene.frame_count
-        for i, bones in enumerate(self.tree_bones):
+        every = self.every
+        angles = np.concatenate(self.angles, axis=1) if self.angles else np.zeros((frames, 0))
+        rot, piv = pose_frames(every, angles)  # every tree at once, level by level
+        quats = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(frames, every.n, 4)
+        out = []
+        for i in range(len(self.trees)):
+            lo, hi = every.offsets[i], every.offsets[i + 1]
             last = int(self.last_frame[i]) + 1
-            quats = np.zeros((frames, bones.n, 4))
-            pivots = np.zeros((frames, bones.n, 3))
-            if last > 0:
-                rot, piv = pose_frames(bones, self.angles[i][:last])
-                quats[:last] = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(
-                    last, bones.n, 4)
-                pivots[:last] = piv
-            out.append(TreeMotion(quats, pivots, [], self.ledger.energy[:, i],
-                                  self.ledger.work[:, i]))
+            q, p = quats[:, lo:hi].copy(), piv[:, lo:hi].copy()
+            q[last:] = 0.0
+            p[last:] = 0.0
+            out.append(TreeMotion(q, p, [], self.ledger.energy[:, i], self.ledger.work[:, i]))
         return out
 
 
@@ -306,27 +306,28 @@ def pose_frames(bones: Bones, qs: np.ndarray):
     """World rotations (F, B, 3, 3) relative to rest and pivots (F, B, 3) of
     every bone from hinge angles (F, 2B): each joint turns its bone by its
     first hinge, then its second (about the axes as they sit in the parent's
-    frame), composed down the tree, as MuJoCo composes two hinges."""
+    frame), composed down the tree, as MuJoCo composes two hinges. Computed
+    as rows (structure of arrays), one depth of the tree at a time."""
     frames = qs.shape[0]
     nb = bones.n
     axes = bones.hinges
     angles = qs.reshape(frames, nb, 2)
-    rot = np.empty((frames, nb, 3, 3))
-    piv = np.empty((frames, nb, 3))
+    rot = np.empty((3, 3, frames, nb))
+    piv = np.empty((3, frames, nb))
     parent = bones.parent
     depth = depths(parent)
     for d in range(int(depth.max()) + 1 if nb else 0):
         b = np.nonzero(depth == d)[0]
-        r0 = matrices_from_rotvec((angles[:, b, 0:1] * axes[b, 0]).reshape(-1, 3))
-        r1 = matrices_from_rotvec((angles[:, b, 1:2] * axes[b, 1]).reshape(-1, 3))
-        own = np.matmul(r0, r1).reshape(frames, len(b), 3, 3)
+        r0 = rotation_rows(angles[None, :, b, 0] * axes[b, 0].T[:, None, :])
+        r1 = rotation_rows(angles[None, :, b, 1] * axes[b, 1].T[:, None, :])
+        own = compose_rows(r0, r1)
         if d == 0:
-            rot[:, b] = own
-            piv[:, b] = bones.pivot0[b]
+            rot[:, :, :, b] = own
+            piv[:, :, b] = bones.pivot0[b].T[:, None, :]
         else:
             p = parent[b]
-            fr = rot[:, p]
-            rot[:, b] = np.matmul(fr, own)
-            piv[:, b] = piv[:, p] + np.einsum("fmij,mj->fmi", fr, bones.pivot0[b]
-                                              - bones.pivot0[p])
-    return rot, piv
+            fr = rot[:, :, :, p]
+            rot[:, :, :, b] = compose_rows(fr, own)
+            arm = (bones.pivot0[b] - bones.pivot0[p]).T[:, None, :]
+            piv[:, :, b] = piv[:, :, p] + turn_rows(fr, arm)
+    return rot.transpose(2, 3, 0, 1), piv.transpose(1, 2, 0)
