@@ -70,6 +70,23 @@ def compose_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def qmul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a b for quaternions as rows (4, ...), x y z w."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz])
+
+
+def qrotate_rows(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Vectors v (3, ...) turned by unit quaternions q (4, ...), as rows."""
+    u, w = q[0:3], q[3]
+    t = 2.0 * cross_rows(u, v)
+    return v + w * t + cross_rows(u, t)
+
+
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b for vectors as rows (3, N)."""
     return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],

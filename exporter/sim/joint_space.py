@@ -198,16 +198,19 @@ class JointSpace:
         own[9:12] = v0 * self.cp0 + v1 * self.cp1
         return self.sums.prefix(own)
 
-    def pose(self, kin: np.ndarray, q: np.ndarray) -> Pose:
+    def pose(self, kin: np.ndarray, q: np.ndarray, loads: bool = True) -> Pose:
         """Bones' pose (rows, (3, B) and (3, 3, B)): rotations exp(rotation
         vector), pivots by summing turned arms down the tree; COM velocities
-        first order."""
+        first order. Without `loads`, no axes and hinges (None): what the
+        energy and the range checks need."""
         rot = rotation_rows(kin[0:3])
         frame = rot[:, :, self.parent_or_self]
         frame[:, :, self.roots] = np.eye(3)[:, :, None]
         pivot = self.sums.prefix(turn_rows(frame, self.arm))
         com = pivot + turn_rows(rot, self.com_arm)
         vcom = cross_rows(kin[6:9], self.com0) - kin[9:12]
+        if not loads:
+            return Pose(rot, pivot, com, vcom, None, None, None)
         first = turn_rows(frame, self.n0)
         second = turn_rows(frame, self.n1 + q[0::2] * self.second_turn)
         return Pose(rot, pivot, com, vcom, turn_rows(rot, self.axis0), first, second)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import compose_rows, quaternions_from_matrices, rotation_rows, turn_rows
+from ..rotations import matrices_from_quaternions, qmul_rows, qrotate_rows
 from ..scene import Scene
 from .audit import Ledger, LoadWork, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
@@ -210,7 +210,7 @@ class LinearTier:
         """Kinematics and pose of the current state (once per step)."""
         if self._state is None:
             kin = self.model.kinematics(self.q, self.v)
-            self._state = (kin, self.model.pose(kin, self.q))
+            self._state = (kin, self.model.pose(kin, self.q, loads=False))
         return self._state
 
     def _leaving(self) -> list[HandOff]:
@@ -247,7 +247,8 @@ class LinearTier:
         if not leaving:
             return []
         out = []
-        rot_exact, _ = pose_frames(b, q[None])
+        quats, _ = pose_frames(b, q[None])
+        rot_exact = matrices_from_quaternions(quats[0])[None]
         for ti_local, (reason, why_kind) in leaving.items():
             ti_local = int(ti_local)
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
@@ -289,8 +290,7 @@ class LinearTier:
         frames = self.scene.frame_count
         every = self.every
         angles = np.concatenate(self.angles, axis=1) if self.angles else np.zeros((frames, 0))
-        rot, piv = pose_frames(every, angles)  # every tree at once, level by level
-        quats = quaternions_from_matrices(rot.reshape(-1, 3, 3)).reshape(frames, every.n, 4)
+        quats, piv = pose_frames(every, angles)  # every tree at once, level by level
         out = []
         for i in range(len(self.trees)):
             lo, hi = every.offsets[i], every.offsets[i + 1]
@@ -303,31 +303,36 @@ class LinearTier:
 
 
 def pose_frames(bones: Bones, qs: np.ndarray):
-    """World rotations (F, B, 3, 3) relative to rest and pivots (F, B, 3) of
-    every bone from hinge angles (F, 2B): each joint turns its bone by its
-    first hinge, then its second (about the axes as they sit in the parent's
-    frame), composed down the tree, as MuJoCo composes two hinges. Computed
-    as rows (structure of arrays), one depth of the tree at a time."""
+    """World rotations relative to rest as unit quaternions (F, B, 4), x y z
+    w with w >= 0, and pivots (F, B, 3) of every bone from hinge angles
+    (F, 2B): each joint turns its bone by its first hinge, then its second
+    (about the axes as they sit in the parent's frame), composed down the
+    tree, as MuJoCo composes two hinges. Computed as rows (structure of
+    arrays), one depth of the tree at a time."""
     frames = qs.shape[0]
     nb = bones.n
     axes = bones.hinges
-    angles = qs.reshape(frames, nb, 2)
-    rot = np.empty((3, 3, frames, nb))
+    half = 0.5 * qs.reshape(frames, nb, 2)
+    rot = np.empty((4, frames, nb))
     piv = np.empty((3, frames, nb))
     parent = bones.parent
     depth = depths(parent)
     for d in range(int(depth.max()) + 1 if nb else 0):
         b = np.nonzero(depth == d)[0]
-        r0 = rotation_rows(angles[None, :, b, 0] * axes[b, 0].T[:, None, :])
-        r1 = rotation_rows(angles[None, :, b, 1] * axes[b, 1].T[:, None, :])
-        own = compose_rows(r0, r1)
+        own = None
+        for k in range(2):
+            s, c = np.sin(half[:, b, k]), np.cos(half[:, b, k])
+            hinge = np.concatenate([s[None] * axes[b, k].T[:, None, :], c[None]])
+            own = hinge if own is None else qmul_rows(own, hinge)
         if d == 0:
-            rot[:, :, :, b] = own
+            rot[:, :, b] = own
             piv[:, :, b] = bones.pivot0[b].T[:, None, :]
         else:
             p = parent[b]
-            fr = rot[:, :, :, p]
-            rot[:, :, :, b] = compose_rows(fr, own)
-            arm = (bones.pivot0[b] - bones.pivot0[p]).T[:, None, :]
-            piv[:, :, b] = piv[:, :, p] + turn_rows(fr, arm)
-    return rot.transpose(2, 3, 0, 1), piv.transpose(1, 2, 0)
+            fr = rot[:, :, p]
+            rot[:, :, b] = qmul_rows(fr, own)
+            arm = np.broadcast_to((bones.pivot0[b] - bones.pivot0[p]).T[:, None, :],
+                                  (3, frames, len(b)))
+            piv[:, :, b] = piv[:, :, p] + qrotate_rows(fr, arm)
+    rot *= np.where(rot[3] < 0, -1.0, 1.0)
+    return rot.transpose(1, 2, 0), piv.transpose(1, 2, 0)
