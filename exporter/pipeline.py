@@ -221,7 +221,14 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             info["solver"] = tiers.get(g.model.name, solver)
             info["events"] = [e.record() for e in motion.events]
             pos, rot = segment_transforms(st_tree.rig, motion.quaternions, motion.pivots)
-        trees.append(tree_bake_from_model(g.model, pos, rot, info))
+        tb = tree_bake_from_model(g.model, pos, rot, info)
+        if motion is not None and len(motion.extra_times):  # fast turns: sub-frame samples
+            extra_pos, extra_rot = segment_transforms(st_tree.rig, motion.extra_quaternions,
+                                                      motion.extra_pivots)
+            tb = replace(tb, extra_times=motion.extra_times,
+                         extra_positions=extra_pos.astype(np.float32),
+                         extra_rotations=extra_rot.astype(np.float32))
+        trees.append(tb)
     timing["wall_seconds"] = round(time.perf_counter() - started, 3)
     return Bake(np.arange(frames) / scene.fps, trees, meta, objects, timing)
 

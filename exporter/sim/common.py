@@ -113,6 +113,36 @@ class TreeMotion:
     events: list = field(default_factory=list)  # events.Event records
     energy: np.ndarray | None = None  # (F,) J, the audit's mechanical energy (audit.py)
     work: np.ndarray | None = None  # (F,) J, external work done on the tree up to each frame
+    # sub-frame samples where a bone turned more than FAST_TURN between frames:
+    # times (K,) s strictly between frames, quaternions (K, B, 4), pivots (K, B, 3)
+    extra_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    extra_quaternions: np.ndarray | None = None
+    extra_pivots: np.ndarray | None = None
+
+
+FAST_TURN = np.radians(45.0)  # rad: a bone turning more between frames gets sub-frame samples
+MAX_EXTRA = 8  # sub-frame samples per frame at most
+
+
+def sub_frame_samples(prev: np.ndarray, cur: np.ndarray, samples: list, offsets: np.ndarray,
+                      store: list[list]) -> None:
+    """Keep the buffered sub-frame `samples` (time s, rotations (B, 3, 3),
+    pivots (B, 3)) for every tree (bone ranges `offsets`) whose bones turned
+    more than FAST_TURN between the frame quaternions `prev` and `cur`
+    (B, 4): appended to store[tree] as (time, quaternions, pivots)."""
+    from ..rotations import angle_between, quaternions_from_matrices
+
+    if not samples:
+        return
+    turn = angle_between(prev, cur)
+    for ti in range(len(offsets) - 1):
+        lo, hi = offsets[ti], offsets[ti + 1]
+        if hi > lo and turn[lo:hi].max() > FAST_TURN:
+            pick = samples if len(samples) <= MAX_EXTRA else [
+                samples[int(k)] for k in np.linspace(0, len(samples) - 1, MAX_EXTRA)]
+            for t, rot, piv in pick:
+                store[ti].append((t, quaternions_from_matrices(rot[lo:hi]), piv[lo:hi].copy()))
+
 
 
 @dataclass

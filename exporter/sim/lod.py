@@ -133,13 +133,12 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     handed: list = []
     for f in range(1, frames):
         if lin is not None:
+            to_pymunk: dict[int, list] = {}  # substep -> hand-offs: one pymunk tier each
             for ho in lin.advance_frame(f):
                 i = lin_idx[ho.tree]
                 to = engine_for(ho.kind)
                 if to == "pymunk":
-                    tier = PymunkTier([trees[i]], scene, quality, loads, log=log)
-                    tier.begin(ho.substep, StartState(ho.rot, ho.omega))
-                    pym.append((tier, [i]))
+                    to_pymunk.setdefault(ho.substep, []).append((i, ho))
                 else:  # the reference's hinges are the linear tier's coordinates
                     ref_runs.append(([i], ho.time, (ho.q, ho.v), ho))
                 uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason)
@@ -147,6 +146,12 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                                     f"to {to}: {ho.reason}"))
                 log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
                     f"({ho.reason})")
+            for substep, group in to_pymunk.items():
+                members = [i for i, _ in group]
+                tier = PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
+                tier.begin(substep, StartState(np.concatenate([ho.rot for _, ho in group]),
+                                               np.concatenate([ho.omega for _, ho in group])))
+                pym.append((tier, members))
         for tier, _ in pym:
             tier.advance_frame(f)
         if progress is not None:
@@ -168,6 +173,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         # the audit goes on: the work done in the linear tier carries over
         mine.energy[start:] = m.energy[start:]
         mine.work[start:] = m.work[start:] + lin.ledger.running[lin_idx.index(i)]
+        mine.extra_times, mine.extra_quaternions = m.extra_times, m.extra_quaternions
+        mine.extra_pivots = m.extra_pivots
 
     for tier, members in pym:
         start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)

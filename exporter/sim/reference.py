@@ -132,6 +132,7 @@ from .common import (
     cap_loads,
     cap_note,
     locate,
+    sub_frame_samples,
 )
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
@@ -803,6 +804,8 @@ class ReferenceSolver:
         steps = (frames - 1) * self.spf
         self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
         first = 0
+        self.samples: list = []
+        self.extra: list[list] = [[] for _ in self.trees]
         if state is not None:
             first = min(round(start / self.h), steps)
             self._set_hinges(*state, first * self.h)
@@ -825,9 +828,15 @@ class ReferenceSolver:
             if update:
                 self._read()
                 self._check(t)
-                if step % self.spf == 0:
+                if step % self.spf:  # between frames: a sample, kept where motion is fast
+                    self.samples.append((t, self.rot.copy(), self._pivots()))
+                else:
                     f = step // self.spf
                     self._record(f, quats, pivots)
+                    if f > first // self.spf:
+                        sub_frame_samples(quats[f - 1], quats[f], self.samples, self.offsets,
+                                          self.extra)
+                    self.samples = []
                     if proj is not None:
                         self.track_pos[f] = proj.data.xpos[proj.proj_body]
                         self.track_quat[f] = proj.data.xquat[proj.proj_body][:, [1, 2, 3, 0]]
@@ -862,8 +871,12 @@ class ReferenceSolver:
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
-            motions[tree.name] = TreeMotion(quats[:, a:b], pivots[:, a:b], events,
-                                            self.ledger.energy[:, ti], self.ledger.work[:, ti])
+            extra = self.extra[ti]
+            motions[tree.name] = TreeMotion(
+                quats[:, a:b], pivots[:, a:b], events, self.ledger.energy[:, ti],
+                self.ledger.work[:, ti], np.array([e[0] for e in extra]),
+                np.array([e[1] for e in extra]).reshape(-1, b - a, 4),
+                np.array([e[2] for e in extra]).reshape(-1, b - a, 3))
         meta = self.meta()
         notes = meta.pop("notes")
         timing = {k: round(v, 3) for k, v in self.timing.items()}
@@ -884,6 +897,12 @@ class ReferenceSolver:
             g.data.qvel[g.hinge_dof[has]] = rates[g.bones][has]
             g.data.time = t
             mujoco.mj_forward(g.model, g.data)
+
+    def _pivots(self) -> np.ndarray:
+        out = np.zeros((self.n, 3))
+        for g in self.groups:
+            out[g.bones] = g.data.xpos[g.body]
+        return out
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray) -> None:
         n = self.n

@@ -52,7 +52,7 @@ from pymunk import batch
 
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
-from ..common import SimTree, TreeMotion, locate
+from ..common import SimTree, TreeMotion, locate, sub_frame_samples
 from ...errors import SimulationError
 from ..audit import Ledger, LoadWork, bone_energy, per_tree
 from ..debris import Debris
@@ -159,6 +159,8 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.rigid_root = np.full(len(self.bodies), -1, dtype=np.int64)
         self.still_time = np.zeros(len(self.trees))
         self.quiet = self._quiet_times()
+        self.samples: list = []  # this frame's update poses (time, rotations, pivots)
+        self.extra: list[list] = [[] for _ in self.trees]  # kept sub-frame samples per tree
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
                              self.radius, scene.ground, self.loads.g)
         self.ledger = Ledger(frames, len(self.trees))
@@ -193,6 +195,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                     self.read()
                     self.check(t)
                     self.prev, self.pose = self.pose, self.reconstruct()
+                    self.samples.append((t, self.pose["rot"], self.pose["pivot"]))
                 self.fresh = False
                 if self.cut_list:
                     self.handle_cuts(t)
@@ -239,6 +242,10 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
             self.prev, self.pose, self.fresh = self.pose, pose_frame, True
         self.quats[f] = quaternions_from_matrices(pose_frame["rot"])
         self.pivots[f] = pose_frame["pivot"]
+        if f > self.first_frame:  # fast turns get the updates between frames as samples
+            sub_frame_samples(self.quats[f - 1], self.quats[f], self.samples, self.offsets,
+                              self.extra)
+        self.samples = []
         self._audit(f, pose_frame)
         if self.projectiles is not None:
             self.projectiles.record(f)
@@ -280,8 +287,12 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
             events = [e for e in self.events if e.tree == tree.name]
+            extra = self.extra[ti]
             out.append(TreeMotion(self.quats[:, a:b], self.pivots[:, a:b], events,
-                                  self.ledger.energy[:, ti], self.ledger.work[:, ti]))
+                                  self.ledger.energy[:, ti], self.ledger.work[:, ti],
+                                  np.array([e[0] for e in extra]),
+                                  np.array([e[1] for e in extra]).reshape(-1, b - a, 4),
+                                  np.array([e[2] for e in extra]).reshape(-1, b - a, 3)))
         return out
 
     def _hand_over(self, start: StartState) -> None:
