@@ -187,6 +187,17 @@ def _levels(name: str) -> str:
 QUALITY = table(
     Key("base", "the level the table starts from", kind="choice", default="default",
         choices=LEVELS),
+    Key("tier", "`auto`: every tree in the linear tier, moved to the nonlinear engine when it "
+        "leaves the linear range; `pymunk`: every tree in the pymunk tier (0.1.0's LOD)",
+        kind="choice", choices=("auto", "pymunk"), doc_default=_levels("tier")),
+    Key("linear_rate", "the linear tier's implicit steps (finer for a stiff tree, split "
+        "during blasts)", "Hz", None, 1.0, 10_000.0, doc_default=_levels("linear_rate")),
+    Key("nonlinear", "the engine for trees that leave the linear range in wind: `auto` (the "
+        "reference when MuJoCo is installed, else pymunk; events always pymunk), "
+        "`reference` or `pymunk`", kind="choice", choices=("auto", "reference", "pymunk"),
+        doc_default=_levels("nonlinear")),
+    Key("reference_step", "the reference's step when it is the nonlinear engine", "s", None,
+        1e-5, 1 / 60, doc_default=_levels("reference_step")),
     Key("substep_rate", "physics steps per second (split further, automatically, during "
         "blasts, hits and fast spins)", "Hz", None, 60.0, 100_000.0,
         doc_default=_levels("substep_rate")),
@@ -198,7 +209,7 @@ QUALITY = table(
         1, 2, "integer", doc_default=_levels("planes")),
     Key("bone_length", "merge a limb's segments into bones at least this fraction of the "
         "tree height (0: one bone per segment)", "", None, 0.0, 0.5,
-        doc_default=" / ".join(("1/12", "1/30", "0"))),
+        doc_default=" / ".join(("1/12", "0", "0"))),
     Key("stability", "largest ω·h of a joint before its rotary inertia is raised "
         "(docs/physics.md)", "", None, 0.1, 2.0, doc_default=_levels("stability")),
     Key("joint_correction", "fraction of a joint's position error corrected per substep", "",

@@ -51,7 +51,7 @@ def nonlinear_engine(quality: Quality) -> str:
 
 
 QUALITIES = {
-    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 30, linear_rate=24.0,
+    "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 12, linear_rate=24.0,
                      reference_step=1 / 240),
     "default": Quality("default", 960.0, 120.0, 10, 2, 0.0, linear_rate=24.0,
                        reference_step=1 / 480),

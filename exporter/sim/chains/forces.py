@@ -70,10 +70,13 @@ class ChainForces:
             for ax in range(3):
                 ftot[:, ax] += np.bincount(a, force[d, ax], minlength=n)
                 torque[:, ax] += np.bincount(a, pair_torque[:, ax], minlength=n)
+        self.grounded = np.zeros(len(self.trees), dtype=bool)
         if self.scene.ground:
             contact = self._ground(pose, dt)
             if contact is not None:
                 self._add_contact(contact, pose, ftot, torque)
+                stem = contact[0][self.bone_frame[contact[0]] < 0]  # root chains' bones
+                self.grounded[self.bone_tree[stem]] = True
         bb = self.body_bone
         f_b, t_b = ftot[bb], torque[bb]
         fr = pose["frame_rot"][bb]
@@ -114,10 +117,13 @@ class ChainForces:
         """Each body's velocity (vx, vy, w) that structural damping acts on:
         relative to its frame, and in a chain whose root joint is cut or gone
         (a felled or uprooted stem), relative to the chain turning rigidly
-        about its root as well: wood damps bending, not a stem's fall."""
+        about its root as well while it falls: wood damps bending, not a
+        stem's fall."""
         s = self.state
         out = s[:, 3:6].copy()
-        free = np.nonzero(self.rigid_root >= 0)[0]
+        # (once its stem lies on the ground, the soil takes part: damped whole)
+        free = np.nonzero((self.rigid_root >= 0)
+                          & ~self.grounded[self.bone_tree[self.body_bone]])[0]
         if len(free):
             r = self.rigid_root[free]
 
