@@ -8,6 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from treebake.library import grammar_path
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.stress import cases
+
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import ROOT, preset_bake
@@ -84,8 +89,12 @@ def test_leaves_are_crossed_quads_or_nothing():
 
 
 def test_broken_joints_split_the_skin():
-    bake = preset_bake("boxes")
-    tree = bake.trees[1]
+    # a blast strips branches off a sapling (the stress suite's case)
+    case = next(c for c in cases() if c.name == "blast breaks branches")
+    bake = bake_scene(parse_scene({**case.scene, "duration": 3.0, "fps": 24,
+                                   "tree": [{"grammar": str(grammar_path("sapling"))}]},
+                                  file="<blast>"))
+    tree = bake.trees[0]
     broken = broken_joints(tree)
     assert broken.any()
     mesh = tree_mesh(tree, broken=broken)
