@@ -12,14 +12,24 @@ memory is that run's):
   machine's cores as workers: what a user gets (its peak memory is the main
   process's; each worker holds a chunk);
 - `lod`: the planar LOD, no culling, one process: the pure cost;
-- `reference`: the full 3D reference (MuJoCo, 1/2000 s), no culling.
+- `reference`: the full 3D reference (MuJoCo), no culling, at its cheapest
+  step that is still accurate (below).
 
-For each: physics time per frame and per substep (mean, p95), microseconds
-per segment-step (physics time / simulated segments x steps), wall time of
-the whole bake including the export to glb, peak memory. Ratios
-LOD/reference come from the same run. A plot of physics time per simulated
-second against tree count sits next to the thesis' (PhysX 2009, one step per
-1/30 s frame assumed).
+First a calibration on 50 trees, 4 s, grammars without breaking (a break is
+a branching event; errors would measure chaos): the truth (the reference,
+one bone per segment, 1/2000 s) against the reference at 1/120, 1/240 and
+1/480 s and the LOD, errors of every segment's end as % of tree height
+(median over trees); the reference's step for the scaling runs is the
+cheapest whose median RMS stays within 0.05 % of height. Error sits next to
+cost in the tables.
+
+For each run: physics time per frame and per substep (mean, p95),
+microseconds per segment-step equivalent at 960 Hz (physics time /
+simulated segments x 960 x simulated seconds: the same yardstick for
+solvers with different steps), wall time of the whole bake including the
+export to glb, peak memory. Ratios LOD/reference come from the same run. A
+plot of physics time per simulated second against tree count sits next to
+the thesis' (PhysX 2009, one step per 1/30 s frame assumed).
 
     python bench/forest.py [--counts 0 50 100 150 200 250] [--duration 10]
                            [--settings lod-culled lod reference] [--out out/bench]
@@ -70,7 +80,51 @@ def forest_scene(count: int, duration: float, culled: bool) -> dict:
     return raw
 
 
-def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
+ACCURATE_PCT = 0.05  # median RMS error (% of height) a reference step must stay within
+STEPS = {"1/120": 1 / 120, "1/240": 1 / 240, "1/480": 1 / 480}
+
+
+def calibrate(log=print) -> dict:
+    """Errors and costs on 50 trees, 4 s, against the every-segment truth;
+    the cheapest accurate reference step."""
+    import tempfile
+
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT / "bench"))
+    from production import tree_errors, unbreakable
+
+    from treebake.pipeline import bake_scene
+    from treebake.scene import parse_scene
+    from treebake.sim.quality import QUALITIES
+
+    with tempfile.TemporaryDirectory() as tmp:
+        raw = forest_scene(50, 4.0, culled=False)
+        raw["forest"]["grammars"] = [unbreakable(str(Path(g).relative_to(ROOT)), Path(tmp))
+                                     for g in raw["forest"]["grammars"]]
+        scene = parse_scene(raw, file="<forest calibration>")
+
+        def timed(**kw):
+            cpu = time.process_time()
+            bake = bake_scene(scene, workers=1, **kw)
+            return bake, time.process_time() - cpu
+
+        truth, _ = timed(solver="full", quality=QUALITIES["final"], timestep=1 / 2000)
+        rows = {}
+        for name, kw in [("lod", {}), *[(f"reference {k}", {"solver": "full", "timestep": h})
+                                        for k, h in STEPS.items()]]:
+            bake, cpu = timed(**kw)
+            rms, mx = tree_errors(bake, truth)
+            rows[name] = {"cpu_seconds": round(cpu, 3), "rms_pct": round(float(np.median(rms)), 5),
+                          "max_pct": round(float(np.median(mx)), 5)}
+            log(f"calibration {name:<18} {cpu:7.2f} cpu s  {rows[name]['rms_pct']:.4f} % rms")
+    ok = [k for k in STEPS if rows[f"reference {k}"]["rms_pct"] <= ACCURATE_PCT]
+    step = max(ok, key=lambda k: STEPS[k]) if ok else "1/480"
+    return {"rows": rows, "reference_step": step}
+
+
+def run_one(count: int, setting: str, duration: float, workers: int,
+            step: float = 1 / 240) -> dict:
     """Bake (and export to glb) one configuration in this process."""
     from treebake.bake import save_bake
     from treebake.export import ExportOptions, export_bake
@@ -82,7 +136,8 @@ def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
     solver = "full" if setting == "reference" else "planar"
     start = time.perf_counter()
     cpu0 = time.process_time()
-    bake = bake_scene(scene, solver=solver, workers=workers if setting == "lod-culled" else 1)
+    bake = bake_scene(scene, solver=solver, workers=workers if setting == "lod-culled" else 1,
+                      timestep=step if solver == "full" else None)
     with tempfile.TemporaryDirectory() as tmp:
         t_export = time.perf_counter()
         path = save_bake(bake, Path(tmp) / "forest.npz")
@@ -91,8 +146,9 @@ def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
         digest = __import__("hashlib").sha256(path.read_bytes()).hexdigest()
     wall = time.perf_counter() - start
     t = bake.timing
-    physics = t.get("step_seconds", 0.0) + t.get("update_seconds", 0.0)
-    steps = t.get("segment_steps", 0)
+    physics = sum(t.get(k, 0.0) for k in ("step_seconds", "update_seconds", "build_seconds",
+                                           "compile_seconds"))
+    steps = sum(tb.n_segments for tb in bake.trees if not tb.static) * 960 * duration
     simulated = [tb for tb in bake.trees if not tb.static]
     return {
         "trees": count, "setting": setting, "simulated_trees": len(simulated),
@@ -111,10 +167,10 @@ def run_one(count: int, setting: str, duration: float, workers: int) -> dict:
     }
 
 
-def measure(count: int, setting: str, duration: float, workers: int) -> dict:
+def measure(count: int, setting: str, duration: float, workers: int, step: str) -> dict:
     """run_one in a fresh process (its own peak memory)."""
     cmd = [sys.executable, __file__, "--one", str(count), setting, "--duration", str(duration),
-           "--workers", str(workers)]
+           "--workers", str(workers), "--step", step]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, cwd=ROOT)
     if done.returncode != 0:
         raise RuntimeError(f"{setting} {count}: {done.stderr[-2000:]}")
@@ -165,18 +221,26 @@ def main() -> None:
     ap.add_argument("--settings", nargs="*", default=list(SETTINGS), choices=SETTINGS)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
+    ap.add_argument("--step", default=None, help="the reference's step, e.g. 1/240 (default: "
+                                                   "calibrated)")
     ap.add_argument("--one", nargs=2, metavar=("COUNT", "SETTING"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
-        print(json.dumps(run_one(int(args.one[0]), args.one[1], args.duration, args.workers)))
+        num, den = args.step.split("/")
+        print(json.dumps(run_one(int(args.one[0]), args.one[1], args.duration, args.workers,
+                                 float(num) / float(den))))
         return
+    cal = calibrate() if args.step is None else {"reference_step": args.step, "rows": {}}
+    step = cal["reference_step"]
+    print(f"reference step for the scaling runs: {step} s (the cheapest within "
+          f"{ACCURATE_PCT} % median RMS of the truth)")
     rows = []
     head = (f"{'trees':>5} {'setting':<11} {'sim':>4} {'segs':>5} {'frame ms':>9} {'p95':>7} "
             f"{'substep ms':>10} {'p95':>7} {'us/seg-step':>11} {'wall s':>7} {'MB':>6}")
     print(head)
     for count in args.counts:
         for setting in args.settings:
-            r = measure(count, setting, args.duration, args.workers)
+            r = measure(count, setting, args.duration, args.workers, step)
             rows.append(r)
             us = f"{r['us_per_segment_step']:.3f}" if r["us_per_segment_step"] else "-"
             print(f"{count:>5} {setting:<11} {r['simulated_trees']:>4} "
@@ -202,8 +266,9 @@ def main() -> None:
                             2)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "forest.json").write_text(json.dumps({"rows": rows, "fit": summary,
-                                                 "thesis": THESIS}, indent=2) + "\n")
+    (out / "forest.json").write_text(json.dumps({"calibration": cal, "rows": rows,
+                                                 "fit": summary, "thesis": THESIS},
+                                                indent=2) + "\n")
     plot(rows, out / "forest.png")
     print("linear fit, physics s per simulated s = slope x trees + intercept:")
     for setting, f in summary.items():

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import resource
 import subprocess
 import sys
@@ -46,12 +47,18 @@ JOBS = {  # name: (scene keys, duration s)
                 "wind": {"speed": 12.0, "turbulence": 0.25}}, 6.0),
     "forest50": (None, 4.0),  # bench/forest.py's forest of 50 trees, no camera
 }
-SETTINGS = {  # name: bake_scene keyword arguments (quality by name)
+SETTINGS = {  # name: bake_scene keyword arguments (quality: a level, or a level and changes)
     "lod": {"solver": "planar", "quality": "default"},
+    "lod-draft": {"solver": "planar", "quality": "draft"},
     "lod-final": {"solver": "planar", "quality": "final"},
-    "ref240": {"solver": "full", "quality": "default", "timestep": 1 / 240},
-    "ref480": {"solver": "full", "quality": "default", "timestep": 1 / 480},
-    "ref240-final": {"solver": "full", "quality": "final", "timestep": 1 / 240},
+    "pymunk": {"solver": "planar", "quality": ("default", {"tier": "pymunk",
+                                                          "bone_length": 1 / 30})},
+    # the reference with 0.1.0's default bones (>= 1/30 of the height), as the issue measured
+    "ref240": {"solver": "full", "quality": ("default", {"bone_length": 1 / 30}),
+               "timestep": 1 / 240},
+    "ref480": {"solver": "full", "quality": ("default", {"bone_length": 1 / 30}),
+               "timestep": 1 / 480},
+    "ref240-every": {"solver": "full", "quality": "final", "timestep": 1 / 240},
     "truth": {"solver": "full", "quality": "final", "timestep": 1 / 2000},
 }
 
@@ -92,16 +99,23 @@ def run_one(job: str, setting: str, out: Path) -> dict:
     from treebake.sim.quality import QUALITIES
 
     kw = dict(SETTINGS[setting])
-    kw["quality"] = QUALITIES[kw["quality"]]
+    level = kw["quality"]
+    kw["quality"] = QUALITIES[level] if isinstance(level, str) else \
+        replace(QUALITIES[level[0]], name="custom", **level[1])
     scene = job_scene(job, out.parent)
     cpu0 = time.process_time()
     bake = bake_scene(scene, workers=1, **kw)
     cpu = time.process_time() - cpu0
     save_bake(bake, out)
     t = bake.timing
+    solvers: dict[str, int] = {}
+    for tb in bake.trees:
+        key = tb.info.get("solver", "static").split(" at ")[0]
+        solvers[key] = solvers.get(key, 0) + 1
     return {"bake_cpu_seconds": round(cpu, 3),
-            "physics_seconds": round(t.get("step_seconds", 0) + t.get("update_seconds", 0), 3),
-            "solvers": bake.meta.get("solvers"), "notes": bake.meta.get("notes", [])}
+            "solver_seconds": round(sum(t.get(k, 0.0) for k in (
+                "step_seconds", "update_seconds", "build_seconds", "compile_seconds")), 3),
+            "solvers": solvers, "notes": bake.meta.get("notes", [])}
 
 
 def measure(job: str, setting: str, folder: Path) -> dict:
@@ -144,7 +158,7 @@ def tree_errors(a, truth) -> tuple[list[float], list[float]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", nargs="*", default=list(JOBS), choices=list(JOBS))
-    ap.add_argument("--settings", nargs="*", default=["lod", "ref240", "ref480"],
+    ap.add_argument("--settings", nargs="*", default=["lod", "pymunk", "ref240", "ref480"],
                     choices=[s for s in SETTINGS if s != "truth"])
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     ap.add_argument("--one", nargs=3, metavar=("JOB", "SETTING", "PATH"), help=argparse.SUPPRESS)
@@ -155,8 +169,8 @@ def main() -> None:
     from treebake.bake import load_bake
 
     rows = []
-    print(f"{'job':<9} {'setting':<13} {'process CPU s':>13} {'sim CPU s':>9} "
-          f"{'RMS %':>8} {'max %':>8}", flush=True)
+    print(f"{'job':<9} {'setting':<13} {'process CPU s':>13} {'bake CPU s':>10} "
+          f"{'solver s':>8} {'RMS %':>8} {'max %':>8}  tiers", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for job in args.jobs:
@@ -173,8 +187,8 @@ def main() -> None:
                 r.pop("path")
                 rows.append(r)
                 print(f"{job:<9} {setting:<13} {r['process_cpu_seconds']:>13.2f} "
-                      f"{r['bake_cpu_seconds']:>9.2f} {r['rms_pct']:>8.4f} {r['max_pct']:>8.3f}",
-                      flush=True)
+                      f"{r['bake_cpu_seconds']:>10.2f} {r['solver_seconds']:>8.2f} "
+                      f"{r['rms_pct']:>8.4f} {r['max_pct']:>8.3f}  {r['solvers']}", flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "production.json").write_text(json.dumps({"rows": rows}, indent=2) + "\n")
