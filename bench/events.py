@@ -29,6 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from treebake.accuracy import event_metrics  # noqa: E402
 from treebake.pipeline import bake_scene  # noqa: E402
 from treebake.sim.events import Event  # noqa: E402
 from treebake.scene import load_scene, parse_scene  # noqa: E402
@@ -49,27 +50,6 @@ def tree_energy(tree, fps: float) -> dict:
     pe = mass.sum() * G * (com[:, 2] - min(0.0, float(mids[..., 2].min())))
     e = ke + pe
     return {"energy": e, "ratio": e / max(e[0], 1e-12), "com": com, "mids": mids}
-
-
-def felling_metrics(tree, fps: float) -> dict:
-    """Time from the cut to the main stem's top touching the ground (below 5 %
-    of the height), the stem's resting azimuth (deg, top relative to base),
-    and its centre-of-mass path (every 6th frame)."""
-    events = tree.info.get("events", [])
-    cut = next((e["time"] for e in events if e["kind"] == "cut"), None)
-    if cut is None:
-        return {}
-    stem = [s for s, p in enumerate(tree.paths) if p.startswith("trunk:")]
-    ends = segment_ends(tree, np.asarray(stem))
-    top = ends[:, -1]
-    low = np.nonzero((top[:, 2] < 0.05 * tree.height) & (np.arange(len(top)) / fps > cut))[0]
-    base = tree.positions[:, stem[0]].astype(float)
-    d = top[-1, :2] - base[-1, :2]
-    mids = 0.5 * (tree.positions[:, stem].astype(float) + ends)
-    com = mids.mean(1)
-    return {"cut_s": cut, "to_ground_s": round(float(low[0] / fps - cut), 3) if len(low) else None,
-            "azimuth_deg": round(float(np.degrees(np.arctan2(d[1], d[0]))), 1),
-            "com_path": np.round(com[::6], 2).tolist()}
 
 
 def measure(bake, scene) -> dict:
@@ -94,7 +74,7 @@ def measure(bake, scene) -> dict:
                 segment_ends(tb, np.arange(tb.n_segments)) - tb.points[tb.seg_end],
                 axis=-1).max()) / tb.height, 2),
             "audit": bake.meta.get("energy", {}).get(tb.name, {}),
-            **felling_metrics(tb, bake.fps)})
+            **{k: v for k, v in event_metrics(tb, bake.fps).items() if k != "broken"}})
     if bake.objects is not None:
         pos = bake.objects.positions.astype(float)
         out["objects_max_height_after_launch"] = [
@@ -135,8 +115,8 @@ def main() -> None:
                       f"{t['peak_displacement_pct']:.1f} %  audit gain "
                       f"{t['audit'].get('max_gain_fraction', 0):.2%}", flush=True)
                 if "to_ground_s" in t:
-                    print(f"{'':<17}cut at {t['cut_s']} s, stem on the ground "
-                          f"{t['to_ground_s']} s later, resting azimuth {t['azimuth_deg']} deg")
+                    print(f"{'':<17}stem on the ground {t['to_ground_s']:.3f} s after the cut, "
+                          f"resting azimuth {t['azimuth_deg']:.1f} deg")
                 for e in t["events"]:
                     print(f"{'':<17}{e}")
             if "objects_max_height_after_launch" in m:

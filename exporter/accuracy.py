@@ -17,7 +17,8 @@ Cases come in classes: small trees (a sapling and the forest species, 22-57
 segments) in calm, breeze, gusty wind, gale, a box hit and a blast; with
 `production`, the bundled production species (oak, spruce, willow, palm,
 bamboo: 149-2818 segments) in breeze and gale, and a 50-tree forest in a
-strong breeze. Per class: the median of every setting, its Pareto front
+strong breeze, and two events against the truth (felling a spruce, a crate
+into an oak). Per class: the median of every setting, its Pareto front
 (no other setting both cheaper and more accurate), and for each quality
 level the reference settings that dominate it, if any.
 
@@ -232,6 +233,77 @@ def run_case(species: str, scenario: str, duration: float, settings: dict[str, S
         return runs
 
 
+EVENT_CASES = {  # name: (preset keys, the tree the metrics are about)
+    "felling spruce": ({"tree": [{"grammar": "grammars/spruce.lsys"}],
+                        "cut": [{"tree": 0, "time": 1.0, "direction": 45.0, "hinge": 40.0}],
+                        "duration": 9.0}, 0),
+    "crate into oak": ({"tree": [{"grammar": "grammars/oak.lsys"}],
+                        "projectile": [{"shape": "box", "size": 0.8, "mass": 150.0,
+                                        "position": [0.0, -9.0, 3.0],
+                                        "velocity": [0.0, 11.0, 3.0], "time": 0.5}],
+                        "duration": 5.0}, 0),
+}
+
+
+def event_metrics(tree, fps: float) -> dict:
+    """From a bake alone: joints broken; the stem's centre of mass path
+    (every 6th frame, m); after a cut, the time from the cut to the main
+    stem's top touching the ground (below 5 % of the height) and its resting
+    azimuth (deg, top relative to base)."""
+    events = tree.info.get("events", [])
+    stem = [s for s, p in enumerate(tree.paths) if p.startswith("trunk:")]
+    ends = segment_ends(tree, np.asarray(stem))
+    mids = 0.5 * (tree.positions[:, stem].astype(float) + ends)
+    out = {"broken": sum(1 for e in events if e["kind"] in ("broke", "uprooted")),
+           "com_path": np.round(mids.mean(1)[::6], 3).tolist()}
+    cut = next((e["time"] for e in events if e["kind"] == "cut"), None)
+    if cut is not None:
+        top = ends[:, -1]
+        low = np.nonzero((top[:, 2] < 0.05 * tree.height) & (np.arange(len(top)) / fps > cut))[0]
+        d = top[-1, :2] - tree.positions[-1, stem[0], :2]
+        out.update(to_ground_s=float(low[0] / fps - cut) if len(low) else math.nan,
+                   azimuth_deg=float(np.degrees(np.arctan2(d[1], d[0]))))
+    return out
+
+
+def run_events(settings: dict[str, Setting], log=None) -> list[dict]:
+    """Event cases on every setting and the truth, with their metrics and the
+    largest difference of the stem's centre-of-mass path from the truth's."""
+    log = log or (lambda msg: None)
+    rows = []
+    for name, (keys, ti) in EVENT_CASES.items():
+        raw = json.loads(json.dumps(keys))
+        for t in raw["tree"]:
+            t["grammar"] = str(grammars_folder().parent / t["grammar"])
+        scene = parse_scene({"name": name, "fps": 24.0, **raw}, file=f"<accuracy {name}>")
+        truth, _ = _bake(scene, Setting("full", QUALITIES["final"], TRUTH_STEP))
+        ref = event_metrics(truth.trees[ti], truth.fps)
+        for label, s in [("truth", None), *settings.items()]:
+            if s is None:
+                bake, cpu, m = truth, math.nan, ref
+            else:
+                try:
+                    bake, cpu = _bake(scene, s)
+                except SimulationError as exc:
+                    rows.append({"case": name, "setting": label, "error": str(exc)})
+                    continue
+                m = event_metrics(bake.trees[ti], bake.fps)
+            path = np.asarray(m["com_path"])
+            n = min(len(path), len(ref["com_path"]))
+            row = {"case": name, "setting": label, "cpu_per_sim_second": cpu / scene.duration,
+                   "broken": m["broken"], "to_ground_s": m.get("to_ground_s", math.nan),
+                   "azimuth_deg": m.get("azimuth_deg", math.nan),
+                   "com_path_error_m": float(np.linalg.norm(
+                       path[:n] - np.asarray(ref["com_path"])[:n], axis=1).max()),
+                   "audit_gain": max((a["max_gain_fraction"] for a in
+                                      bake.meta.get("energy", {}).values()), default=0.0)}
+            log(f"  {name:<16} {label:<30} broken {row['broken']:>4}  to ground "
+                f"{row['to_ground_s']:.3f} s  azimuth {row['azimuth_deg']:.1f} deg  COM path "
+                f"off {row['com_path_error_m']:.2f} m  audit {row['audit_gain']:.2%}")
+            rows.append(row)
+    return rows
+
+
 def pareto(points: list[tuple[float, float]]) -> list[int]:
     """Indices of the points no other point beats in both cost and error."""
     order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
@@ -290,7 +362,8 @@ def _clean(obj):
     return _num(obj) if isinstance(obj, float) else obj
 
 
-def report_markdown(summary: list[dict], runs: list[Run], meta: dict) -> str:
+def report_markdown(summary: list[dict], runs: list[Run], meta: dict,
+                    events: list[dict] | None = None) -> str:
     lines = ["# Accuracy: error against cost, against one truth", "",
              (f"Truth: the MuJoCo reference with one bone per segment at "
               f"{meta['truth_step']:.6g} s. Cases: {', '.join(meta['cases'])}; "
@@ -326,6 +399,24 @@ def report_markdown(summary: list[dict], runs: list[Run], meta: dict) -> str:
         if not bad:
             lines.append(f"- Every quality level sits on or off the front without a reference "
                          f"setting dominating it on {kind}.")
+        lines.append("")
+    if events:
+        lines += ["## Events against the truth", "",
+                  ("Felling and a 150 kg crate at 11 m/s into a full-size oak, with the "
+                   "species' own strengths (the truth: the reference, one bone per segment, at "
+                   f"{meta['truth_step']:.6g} s). Time from the cut to the stem's top on the "
+                   "ground, its resting azimuth, the largest distance of the stem's centre of "
+                   "mass from the truth's over the shot, joints broken, the energy audit's "
+                   "largest unexplained gain."), "",
+                  ("| case | setting | to ground s | azimuth deg | COM path off m | broken | "
+                   "audit gain | CPU s/s |"), "|---|---|---|---|---|---|---|---|"]
+        for e in events:
+            if "error" in e:
+                lines.append(f"| {e['case']} | {e['setting']} | failed: {e['error']} |||||")
+                continue
+            lines.append(f"| {e['case']} | {e['setting']} | {e['to_ground_s']:.3f} | "
+                         f"{e['azimuth_deg']:.1f} | {e['com_path_error_m']:.2f} | {e['broken']} "
+                         f"| {e['audit_gain']:.2%} | {e['cpu_per_sim_second']:.3g} |")
         lines.append("")
     lines += ["## Every run", "",
               "| case | setting | CPU s/s | solver s/s | RMS pos % | max pos % | f ratio | tiers |",
@@ -389,13 +480,17 @@ def accuracy(out: str | Path = "out/accuracy", species: list[str] | None = None,
     for sp, sc in cases:
         runs += run_case(sp, sc, duration, settings, log)
     summary = summarise(runs)
+    events = run_events({k: settings[k] for k in settings
+                         if k in ("default", "final", "pymunk (0.1.0 default)",
+                                  "reference 1/480")}, log) if production else []
     meta = {"truth_step": TRUTH_STEP, "cases": [f"{sp}/{sc}" for sp, sc in cases],
             "duration": duration,
             "settings": {k: {"solver": v.solver, "quality": asdict(v.quality),
                              "timestep": v.timestep} for k, v in settings.items()}}
-    data = _clean({"meta": meta, "summary": summary, "runs": [asdict(r) for r in runs]})
+    data = _clean({"meta": meta, "summary": summary, "runs": [asdict(r) for r in runs],
+                   "events": events})
     out = Path(out)
     write_text(out / "report.json", json.dumps(data, indent=2, allow_nan=False) + "\n")
-    write_text(out / "report.md", report_markdown(summary, runs, meta))
+    write_text(out / "report.md", report_markdown(summary, runs, meta, events))
     plot(summary, out / "plot.png")
     return data
