@@ -75,6 +75,8 @@ class SpeciesCheck:
     bend_path: str
     bend_degrees: float  # that joint's angle, degrees
     bend_first_order: float  # largest moment / (k cone), gravity's stiffness left out
+    turn: float  # rad, the most a bone turns from rest at STRONG_BREEZE (gusts included)
+    turn_path: str
     gust: float = GUST
 
     @property
@@ -211,41 +213,123 @@ def _first_crossing(util: np.ndarray, speeds: np.ndarray) -> np.ndarray:
     return out
 
 
-def bending_frame(rig: Rig) -> np.ndarray:
-    """(B, 3, 2): two unit vectors perpendicular to each bone's axis, the
-    plane its joint bends in (the joint's two hinges; twist is rigid)."""
+def hinge_frame(rig: Rig) -> np.ndarray:
+    """(B, 3, 2): each joint's two hinge axes, perpendicular to the bone and
+    to each other (swing without twist; the first horizontal when it can
+    be: z x axis, else x x axis), the convention of both solvers."""
     axis = rig.axis
-    helper = np.where(np.abs(axis[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    e1 = np.cross(axis, helper)
+    e1 = np.cross(np.array([0.0, 0.0, 1.0]), axis)
+    flat = np.linalg.norm(e1, axis=1) <= 0.1
+    e1[flat] = np.cross(np.array([1.0, 0.0, 0.0]), axis[flat])
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(axis, e1)
-    return np.stack([e1, e2], axis=2)
+    return np.stack([e1, np.cross(axis, e1)], axis=2)
 
 
-def joint_compliance(rig: Rig, levels: list[np.ndarray] | None = None) -> np.ndarray:
-    """(B, 2, 2) rad/(N m): each joint's rotation per unit bending moment,
-    its spring k plus gravity's geometric stiffness of everything it carries
-    turning about it as one body, m g (sym(e_z r^T) - r_z I) with r the
-    carried centre of mass from the pivot (a hanging twig's pendulum
-    stiffness, an upright stem's P-delta softening). inf where the sum is
-    not positive definite (the joint cannot hold its load)."""
-    levels = _levels(rig.bone_parent) if levels is None else levels
-    msum = _subtree_sums(rig.bone_parent, levels, rig.mass)
-    mcsum = _subtree_sums(rig.bone_parent, levels, rig.mass[:, None] * rig.com)
-    lever = mcsum - msum[:, None] * rig.pivot  # m r, kg m
-    ez = np.array([0.0, 0.0, 1.0])
-    kg = GRAVITY * (0.5 * (ez[None, :, None] * lever[:, None, :]
-                           + lever[:, :, None] * ez[None, None, :])
-                    - lever[:, 2, None, None] * np.eye(3))
-    frame = bending_frame(rig)
-    a = rig.k[:, None, None] * np.eye(2) + np.einsum("bia,bij,bjc->bac", frame, kg, frame)
-    det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0]
-    ok = (a[:, 0, 0] > 0) & (det > 0)
-    inv = np.full_like(a, math.inf)
-    adj = np.stack([np.stack([a[:, 1, 1], -a[:, 0, 1]], 1),
-                    np.stack([-a[:, 1, 0], a[:, 0, 0]], 1)], 1)
-    inv[ok] = adj[ok] / det[ok, None, None]
-    return inv
+class StaticSolver:
+    """Small static deflections of a tree from its rest pose under loads at
+    the bones' centres of mass: (K_s + K_g) q = J^T F, q (2B,) the hinge
+    angles (two per joint), K_s the joint springs (k on both hinges), K_g
+    gravity's geometric stiffness at rest (a hanging twig swings back like
+    a pendulum, an upright stem is softened, P-delta):
+
+        K_g[i, j] = -((n_j . g)(n_i . R_j) - (R_j . g)(n_i . n_j))
+
+    for hinge i an ancestor of (or equal to) hinge j, n their axes, g the
+    gravity vector, R_j the mass moment sum m (c - p_j) of everything hinge
+    j carries. The matrix has entries only between a hinge and its
+    ancestors, so it factors as L^T D L without fill-in (Featherstone 2005).
+    The prestress holds the rest pose against gravity, so loads other than
+    gravity are what move it. Linear: a swing is not capped at the
+    streaming angle, so pendulous twigs come out on the safe side."""
+
+    def __init__(self, rig: Rig, levels: list[np.ndarray] | None = None):
+        self.rig = rig
+        levels = _levels(rig.bone_parent) if levels is None else levels
+        nb = rig.n_bones
+        n = 2 * nb
+        self.frame = frame = hinge_frame(rig)
+        axes = frame.transpose(0, 2, 1).reshape(n, 3)  # dof 2b + h: bone b's hinge h
+        bone = np.repeat(np.arange(nb), 2)
+        parent = np.empty(n, dtype=np.int64)
+        parent[0::2] = np.where(rig.bone_parent >= 0, 2 * rig.bone_parent + 1, -1)
+        parent[1::2] = np.arange(0, n, 2)
+        depth = np.zeros(n, dtype=np.int64)
+        for j in range(n):
+            if parent[j] >= 0:
+                depth[j] = depth[parent[j]] + 1
+        width = int(depth.max()) + 1
+        anc = np.full((n, width), -1, dtype=np.int64)  # root-aligned ancestors, self last
+        for j in range(n):
+            p = parent[j]
+            if p >= 0:
+                anc[j, :depth[j]] = anc[p, :depth[j]]
+            anc[j, depth[j]] = j
+        msum = _subtree_sums(rig.bone_parent, levels, rig.mass)
+        mcsum = _subtree_sums(rig.bone_parent, levels, rig.mass[:, None] * rig.com)
+        lever = (mcsum - msum[:, None] * rig.pivot)[bone]  # R_j, kg m
+        g = np.array([0.0, 0.0, -GRAVITY])
+        valid = anc >= 0
+        ai = np.where(valid, anc, 0)
+        ni = axes[ai]  # (n, width, 3)
+        nj = axes[:, None, :]
+        rj = lever[:, None, :]
+        rows = -((axes @ g)[:, None] * (ni * rj).sum(2) - (lever @ g)[:, None] * (ni * nj).sum(2))
+        rows = np.where(valid, rows, 0.0)
+        rows[np.arange(n), depth] += np.repeat(rig.k, 2)
+        # L^T D L in place, deepest dofs first (a dof's row is final once its
+        # descendants are done); rows[k, :depth[k]] become L, the diagonal D
+        tri = np.tril(np.ones((width, width)))
+        order = np.argsort(-depth, kind="stable")
+        self.stable = True
+        for k in order:
+            d = depth[k]
+            pivot = rows[k, d]
+            if not pivot > 0:
+                self.stable = False
+                pivot = math.inf
+            if d:
+                a = rows[k, :d] / pivot
+                up = anc[k, :d]
+                rows[up, :d] -= a[:, None] * rows[k, None, :d] * tri[:d, :d]
+                rows[k, :d] = a
+        self.rows, self.anc, self.depth, self.axes = rows, anc, depth, axes
+        self.diag = rows[np.arange(n), depth].copy()
+        self.hold = np.einsum("bia,bi->ba", frame,
+                              joint_moments(rig, gravity_forces(rig), levels))  # (B, 2) N m
+
+    def solve(self, torque: np.ndarray) -> np.ndarray:
+        """Hinge angles (2B, K) rad for hinge torques (2B, K) N m."""
+        rows, anc, depth = self.rows, self.anc, self.depth
+        x = np.array(torque, dtype=float, copy=True)
+        n = len(depth)
+        for k in range(n - 1, -1, -1):  # L^T
+            d = depth[k]
+            if d:
+                x[anc[k, :d]] -= rows[k, :d, None] * x[k]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x /= self.diag[:, None]
+        for k in range(n):  # L
+            d = depth[k]
+            if d:
+                x[k] -= (rows[k, :d, None] * x[anc[k, :d]]).sum(0)
+        return x
+
+    def hinge_torques(self, moments: np.ndarray) -> np.ndarray:
+        """(2B, K) N m: joint moment vectors (B, K, 3) on each joint's hinges."""
+        t = np.einsum("bia,bki->bak", self.frame, moments)
+        return t.reshape(-1, t.shape[-1])
+
+    def turns(self, q: np.ndarray, levels: list[np.ndarray]) -> np.ndarray:
+        """(B, K) rad: how far each bone turns from its rest pose (the
+        rotation vectors of the joints below it added, first order)."""
+        nb = self.rig.n_bones
+        own = (q.reshape(nb, 2, -1)[:, :, :, None]
+               * self.frame.transpose(0, 2, 1)[:, :, None, :]).sum(1)  # (B, K, 3)
+        total = own.copy()
+        parent = self.rig.bone_parent
+        for idx in reversed(levels):  # shallowest first
+            total[idx] += total[parent[idx]]
+        return np.linalg.norm(total, axis=2)
 
 
 def check(grammar: str | Path, seed: int | None = None, quality: str = "default",
@@ -259,35 +343,32 @@ def check(grammar: str | Path, seed: int | None = None, quality: str = "default"
     seg = first_segments(rig)
     diameter = np.maximum(model.width[seg], rig.options.min_width)
     strength = rig.strength
-    frame = bending_frame(rig)
-    compliance = joint_compliance(rig, levels)
-    # bending moments: the components across each bone (twist is rigid)
-    m_grav = np.einsum("bia,bi->ba", frame, joint_moments(rig, gravity_forces(rig), levels))
+    solver = StaticSolver(rig, levels)
+    hold = solver.hold  # (B, 2): gravity's bending moment, held by the springs at rest
     finite = np.isfinite(strength)
     safe = np.where(finite, strength, 1.0)
-    static = np.where(finite, np.linalg.norm(m_grav, axis=1) / safe, 0.0)
+    static = np.where(finite, np.linalg.norm(hold, axis=1) / safe, 0.0)
     worst = int(np.argmax(static))
     speeds = np.asarray(speeds, dtype=float)
-    breeze_at = len(speeds)
-    speeds_b = np.append(speeds, STRONG_BREEZE)
-    break_speed = np.full(rig.n_bones, math.inf)
-    bend = np.zeros(rig.n_bones)
-    bend_plain = np.zeros(rig.n_bones)
-    for az in azimuths:
-        m_wind = gust * np.einsum("bia,bki->bka", frame,
-                                  joint_moments(rig, wind_forces(rig, speeds_b, az), levels))
-        with np.errstate(invalid="ignore"):
-            turn = np.einsum("bac,bkc->bka", compliance, m_wind)  # rad
-        turn = np.where(np.isfinite(turn), turn, math.inf)
-        spring = m_grav[:, None, :] + rig.k[:, None, None] * turn  # the spring's moment
-        with np.errstate(invalid="ignore"):
-            util = np.where(finite[:, None], np.linalg.norm(spring[:, :breeze_at], axis=2)
-                            / safe[:, None], 0.0)
-        break_speed = np.minimum(break_speed, _first_crossing(np.nan_to_num(util, nan=np.inf),
-                                                              speeds))
-        bend = np.maximum(bend, np.linalg.norm(turn[:, breeze_at], axis=1) / rig.cone)
-        bend_plain = np.maximum(bend_plain,
-                                np.linalg.norm(m_wind[:, breeze_at], axis=1) / rig.k / rig.cone)
+    grid = np.append(speeds, STRONG_BREEZE)  # the scan, and the bend rule's wind last
+    k = len(grid)
+    moments = np.concatenate([gust * joint_moments(rig, wind_forces(rig, grid, az), levels)
+                              for az in azimuths], axis=1)  # (B, A K, 3)
+    q = solver.solve(solver.hinge_torques(moments)) if solver.stable else \
+        np.full((2 * rig.n_bones, moments.shape[1]), math.inf)
+    q2 = q.reshape(rig.n_bones, 2, len(azimuths), k)
+    spring = hold[:, :, None, None] + rig.k[:, None, None, None] * q2  # N m, what breaks
+    with np.errstate(invalid="ignore"):
+        util = np.where(finite[:, None, None],
+                        np.linalg.norm(spring, axis=1) / safe[:, None, None], 0.0)
+    util = np.nan_to_num(util, nan=math.inf)
+    break_speed = np.min([_first_crossing(util[:, a, :-1], speeds)
+                          for a in range(len(azimuths))], axis=0)
+    angle = np.linalg.norm(q2[:, :, :, -1], axis=1).max(1)  # rad, in the strong breeze
+    bend = angle / rig.cone
+    bend_plain = (np.linalg.norm(moments.reshape(rig.n_bones, len(azimuths), k, 3)[:, :, -1],
+                                 axis=2).max(1) / rig.k / rig.cone)
+    turn = solver.turns(q[:, k - 1::k], levels).max(1)  # rad, in the strong breeze
     limb = diameter > LIMB
 
     def first(mask):
@@ -300,6 +381,7 @@ def check(grammar: str | Path, seed: int | None = None, quality: str = "default"
     limb_speed, limb_path, limb_d = first(limb)
     twig_speed, twig_path, _ = first(~limb)
     b_bend = int(np.argmax(bend))
+    b_turn = int(np.argmax(turn))
     return SpeciesCheck(
         name=Path(grammar).stem, grammar=str(grammar), height=model.height, dbh=model.dbh(),
         segments=model.n_segments,
@@ -309,8 +391,9 @@ def check(grammar: str | Path, seed: int | None = None, quality: str = "default"
         twig_break_speed=twig_speed, twig_break_path=twig_path,
         first_break_speed=float(min(limb_speed, twig_speed)),
         bend=float(bend[b_bend]), bend_path=paths[seg[b_bend]],
-        bend_degrees=float(math.degrees(bend[b_bend] * rig.cone[b_bend])),
-        bend_first_order=float(bend_plain.max()), gust=gust)
+        bend_degrees=float(math.degrees(angle[b_bend])),
+        bend_first_order=float(bend_plain.max()),
+        turn=float(turn[b_turn]), turn_path=paths[seg[b_turn]], gust=gust)
 
 
 def report(grammars, **kwargs) -> list[dict]:
