@@ -28,6 +28,9 @@ ESTIMATE_BANDS = {  # f1 Hz: cantilever estimates ("[D]"), not measurements
     "palm": (0.15, 0.45),
     "bamboo": (0.15, 0.5),
     "sapling": (0.7, 2.0),
+    "forest/conifer": (0.3, 0.7),  # as spruce (18 m, DBH 0.3 m)
+    "forest/broadleaf": (0.3, 1.0),  # as oak (16 m, DBH 0.46 m)
+    "forest/birch": (0.2, 0.7),  # slender birch (16 m, DBH 0.2 m), section 1.2
 }
 INTACT_CROWN_DAMPING = (0.08, 0.5)  # Moore & Maguire 2005, intact crowns (field data)
 NO_DAMPING_DATA = {"palm", "bamboo"}  # no field data: the grammars take a low value
