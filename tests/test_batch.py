@@ -304,7 +304,9 @@ def _wait_running(tmp_path, timeout: float = 120) -> None:
 
 
 def test_kill_9_of_one_worker_retries_only_its_job(tmp_path, root):
-    proc = _start_batch(tmp_path, root, SLOW_JOBS, "--jobs", "2", "--json")
+    # 60 s of a sapling: a few seconds per job on the linear tier, long enough to be killed
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 60.0"),
+                        "--jobs", "2", "--json")
     _wait_running(tmp_path)
     victim = _busy_workers(proc, 2)[0]
     os.kill(victim, signal.SIGKILL)
