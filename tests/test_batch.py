@@ -103,7 +103,11 @@ def test_parallel_equals_serial_byte_for_byte(tmp_path, root):
 
 
 def test_killed_batch_resumes_to_the_same_bytes(tmp_path, root):
-    body = QUICK.replace("duration = 0.4", "duration = 1.5")
+    # job b long enough (oak and sapling, 20 s) to be under way when the batch is killed:
+    # on the linear tier 1.5 s jobs ended within the 0.3 s wait
+    body = QUICK.replace("duration = 0.4", "duration = 1.5").replace(
+        'scene = "ROOT/presets/breeze.toml"', 'scene = "ROOT/presets/breeze.toml"\nduration = 20.0')
+    assert "duration = 20.0" in body
     jobs_path = job_file(tmp_path, root, body)
     clean = tmp_path / "clean"
     run_batch(load_jobs(jobs_path), clean, workers=1)
