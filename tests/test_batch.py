@@ -335,7 +335,8 @@ def test_a_job_whose_worker_always_dies_fails_alone(tmp_path, root):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_sigint_or_sigterm_stops_cleanly_with_a_summary(tmp_path, root, sig):
-    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 20.0"),
+    # 600 s jobs: still under way when the signal comes (the linear tier ran 20 s ones in ~1 s)
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 600.0"),
                         "--jobs", "2")
     _wait_running(tmp_path)
     workers = _busy_workers(proc, 2)
@@ -352,7 +353,7 @@ def test_sigint_or_sigterm_stops_cleanly_with_a_summary(tmp_path, root, sig):
 
 
 def test_workers_die_with_a_killed_batch(tmp_path, root):
-    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 20.0"),
+    proc = _start_batch(tmp_path, root, SLOW_JOBS.replace("duration = 3.0", "duration = 600.0"),
                         "--jobs", "2")
     _wait_running(tmp_path)
     workers = _busy_workers(proc, 2)

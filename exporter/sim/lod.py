@@ -343,6 +343,9 @@ class PlanarLOD:
         if refs:
             meta["reference_runs"] = len(refs)
             meta["reference_step"] = quality.reference_step
+            # joints the reference broke after a hand-off count with the pymunk tier's
+            stats["broken"] += sum(r.meta["stats"]["broken"] for r in refs)
+            stats["debris"] += sum(r.meta["stats"]["parts"] for r in refs)
             notes += list(dict.fromkeys(n for r in refs for n in r.notes))
         step = (sum(s.step_seconds for s in lin) + st.step_seconds
                 + sum(r.timing.get("step_seconds", 0.0) for r in refs))
