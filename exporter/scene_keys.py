@@ -192,9 +192,9 @@ QUALITY = table(
         kind="choice", choices=("auto", "pymunk"), doc_default=_levels("tier")),
     Key("linear_rate", "the linear tier's implicit steps (finer for a stiff tree, split "
         "during blasts)", "Hz", None, 1.0, 10_000.0, doc_default=_levels("linear_rate")),
-    Key("nonlinear", "the engine for trees that leave the linear range in wind or near "
-        "breaking: `auto` (the reference when MuJoCo is installed, else pymunk; cuts, ground "
-        "contact and projectiles always pymunk), "
+    Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
+        "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
+        "installed, else pymunk; cuts and ground contact always pymunk), "
         "`reference` or `pymunk`", kind="choice", choices=("auto", "reference", "pymunk"),
         doc_default=_levels("nonlinear")),
     Key("reference_step", "the reference's step when it is the nonlinear engine", "s", None,

@@ -4,6 +4,7 @@ ground at rest, where it should."""
 import math
 
 import numpy as np
+import pytest
 from simkit import tip
 
 from treebake.pipeline import bake_scene
@@ -132,3 +133,39 @@ def test_projectile_and_tree_exchange_momentum(tmp_path):
     # push (the minimum over the whole run would be frame 0, at rest, always)
     peak = int(np.argmax(top[:, 0]))
     assert peak < len(top) - 1 and top[peak:, 0].min() < 0.5 * top[peak, 0]
+
+
+def test_projectile_trees_run_on_the_reference_and_fall_back_to_pymunk(tmp_path, root,
+                                                                         monkeypatch):
+    """Trees a projectile can reach run on the reference when MuJoCo is
+    installed (a crate must smash the sapling as the truth does); where the
+    reference fails (here made to), the pymunk tier takes them from the
+    start, the projectile included, and the bake says so."""
+    pytest.importorskip("mujoco")
+    from treebake.errors import SimulationError
+    from treebake.sim import reference
+
+    grammar = (root / "grammars" / "sapling.lsys").read_text()
+    hit = {"duration": 1.5, "projectile": [{"shape": "box", "size": 0.3, "mass": 20.0,
+                                            "position": [-2.0, 0.0, 1.5],
+                                            "velocity": [9.0, 0.0, 1.0], "time": 0.1}]}
+    runs = {}
+    for name in ("reference", "failing"):
+        if name == "failing":
+            def fail(self, *args, **kwargs):
+                raise SimulationError("made to fail for the test", "sapling", 0, 0.0)
+
+            monkeypatch.setattr(reference.ReferenceSolver, "run", fail)
+        (tmp_path / name).mkdir()
+        b = bake(tmp_path / name, grammar, **hit)
+        tree = b.trees[0]
+        ends = segment_ends(tree, np.arange(tree.n_segments))
+        runs[name] = (tree.info["solver"], np.abs(ends - ends[0]).max(),
+                      b.objects.positions[:, 0, 0].astype(float))
+    assert runs["reference"][0] == "reference"
+    assert runs["failing"][0] == "pymunk (the reference failed)"
+    for solver, moved, box_x in runs.values():
+        assert moved > 0.1  # the box hit the tree on either engine
+        # the box gave momentum to the tree: slower after the hit (t ~ 0.3 s) than before
+        speed = np.diff(box_x) * 24.0
+        assert speed[12:18].mean() < 0.95 * speed[3:6].mean()
