@@ -15,7 +15,7 @@ from treebake.stress import cases
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
-from bakes import ROOT, preset_bake
+from bakes import ROOT
 
 from treebake.bake import tree_bake_from_model
 from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh

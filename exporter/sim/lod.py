@@ -5,7 +5,8 @@ Within a chunk, every tree starts in the linear tier (linear.py) and moves
 to a nonlinear engine — the pymunk tier (chains/) or the MuJoCo reference
 (`engine_for`) — with its pose and spin when it leaves the linear range;
 trees a projectile can reach start in the nonlinear engine, which owns the
-projectiles. Where the reference fails, the pymunk tier takes its trees. `Quality.tier = "pymunk"` keeps every tree there.
+projectiles. Where the reference fails, the pymunk tier takes its trees.
+`Quality.tier = "pymunk"` keeps every tree in the pymunk tier.
 
 Trees do not interact in the planar LOD (projectiles aside), but a solver
 makes some decisions for all its trees at once (loads re-evaluated every
