@@ -106,4 +106,8 @@ def test_broken_joints_split_the_skin():
     whole = tree_mesh(tree, broken=np.zeros_like(broken))
     pw, _ = pose(whole, tree, len(bake.times) - 1)
     fw = whole.parts[0].faces
-    assert np.linalg.norm(pw[fw[:, 0]] - pw[fw[:, 1]], axis=1).max() > 1.0  # it would have
+    rest_w = np.linalg.norm(whole.positions[fw[:, 0]] - whole.positions[fw[:, 1]], axis=1)
+    moved_w = np.linalg.norm(pw[fw[:, 0]] - pw[fw[:, 1]], axis=1)
+    # one skin over tree and debris fails the same bound: the split is what keeps it
+    assert (moved_w > 1.5 * rest_w + 0.05).any()
+    assert moved_w.max() > 0.5  # stretched by metres, not millimetres
