@@ -107,6 +107,18 @@ def test_load_errors(tmp_path):
     assert info.value.line == 2 and "UTF-8" in info.value.message
 
 
+@pytest.mark.parametrize("head, says", [(b"PK\x03\x04", "treebake preview"),
+                                        (b"glTF\x02\x00\x00\x00", "binary glTF"),
+                                        (b"PXR-USDC", "USD crate")])
+def test_a_bake_or_an_export_is_named_not_parsed(tmp_path, head, says):
+    # 2 MB: without the check this is "larger than 1000000 bytes", which misleads
+    f = tmp_path / "thing.bin"
+    f.write_bytes(head + bytes(2_000_000))
+    with pytest.raises(GrammarError, match="not a grammar") as info:
+        load_grammar(f)
+    assert says in info.value.message
+
+
 def test_every_library_grammar_parses(root):
     files = sorted((root / "grammars").rglob("*.lsys"))
     assert len(files) >= 30

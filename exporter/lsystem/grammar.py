@@ -233,6 +233,17 @@ def _strip_comment(line: str) -> str:
     return line.rstrip()
 
 
+# files users pass by mistake (a bake, an export): named, not parsed as text
+NOT_GRAMMARS = (
+    (b"PK\x03\x04", "a zip archive (a treebake bake is one: `treebake preview` and "
+     "`treebake export` read bakes)"),
+    (b"glTF", "a binary glTF file (an export)"),
+    (b"PXR-USDC", "a USD crate file (an export)"),
+    (b"#usda", "a USD text file (an export)"),
+    (b"\x89PNG", "a PNG image"),
+)
+
+
 def load_grammar(path: str | Path) -> Grammar:
     """Read and parse a grammar file."""
     p = Path(path)
@@ -240,6 +251,9 @@ def load_grammar(path: str | Path) -> Grammar:
         data = p.read_bytes()
     except OSError as exc:
         raise GrammarError(f"cannot read grammar: {exc.strerror}", str(p), 0, 0) from None
+    kind = next((k for magic, k in NOT_GRAMMARS if data.startswith(magic)), None)
+    if kind:
+        raise GrammarError(f"this is {kind}, not a grammar (.lsys text)", str(p), 0, 0)
     if len(data) > MAX_FILE_BYTES:
         raise GrammarError(f"grammar file larger than {MAX_FILE_BYTES} bytes", str(p), 0, 0)
     try:
