@@ -15,6 +15,11 @@ bakes alone (independent of either solver's bookkeeping):
   azimuth of the stem; boxes: the highest point a box reaches after a hit.
 
     python bench/events.py [--cases felling boxes blast] [--solvers planar full]
+                           [--timestep 1/64000]   # the full reference's step (s)
+
+A blast on a sapling's twigs is the case to convergence-check: the reference's
+peak twig moments ("closest to breaking", the largest moment / strength any
+joint reached on the reference) still grow as its step falls below 1/2000 s.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -97,15 +103,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
     ap.add_argument("--solvers", nargs="*", default=["planar", "full"])
+    ap.add_argument("--timestep", type=Fraction, default=None,
+                    help="the full reference's step, s (e.g. 1/64000; default: its own)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
+    step = float(args.timestep) if args.timestep else None
     rows = []
     for case in args.cases:
         for solver in args.solvers:
             scene = CASES[case]()
-            bake = bake_scene(scene, solver=solver, workers=1)
+            bake = bake_scene(scene, solver=solver, workers=1,
+                              timestep=step if solver == "full" else None)
             m = measure(bake, scene)
-            m.update(case=case, solver=solver)
+            m.update(case=case, solver=solver, timestep=bake.meta.get("substep"))
             rows.append(m)
             for t in m["trees"]:
                 print(f"{case:<8} {solver:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
@@ -119,11 +129,17 @@ def main() -> None:
                           f"resting azimuth {t['azimuth_deg']:.1f} deg")
                 for e in t["events"]:
                     print(f"{'':<17}{e}")
+            closest = bake.meta.get("stats", {}).get("closest_to_breaking")
+            m["closest_to_breaking"] = closest
+            if closest:  # the reference's (the LOD's tiers do not keep it)
+                print(f"{'':<17}closest to breaking: {closest['fraction']:.3f} of strength at "
+                      f"{closest['tree']} {closest['segment']}, t = {closest['time_s']:.3f} s")
             if "objects_max_height_after_launch" in m:
                 print(f"{'':<17}objects' highest points: {m['objects_max_height_after_launch']}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "events.json").write_text(json.dumps(rows, indent=2, default=str) + "\n")
+    name = f"events-{args.timestep}".replace("/", "_") if args.timestep else "events"
+    (out / f"{name}.json").write_text(json.dumps(rows, indent=2, default=str) + "\n")
 
 
 if __name__ == "__main__":

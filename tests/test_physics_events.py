@@ -134,6 +134,12 @@ def test_an_uprooted_palm_on_the_reference_creates_no_energy():
         assert audit["max_gain_fraction"] < 0.01, (name, audit)
     assert b.meta["stats"]["broken"] < 40  # 16 now; 115 while the energy grew
     assert b.meta["stats"]["damping_scaled"] > 0  # the free parts' damping was held stable
+    # a joint past its strength breaks at that check: the closest one to breaking broke
+    closest = b.meta["stats"]["closest_to_breaking"]
+    assert closest["fraction"] > 1.0
+    broke = {(t.name, e["segment"]) for t in b.trees for e in t.info["events"]
+             if e["kind"] in ("broke", "uprooted")}
+    assert (closest["tree"], closest["segment"]) in broke
 
 
 def test_tornado_debris_rolling_on_the_ground_creates_no_energy():

@@ -355,6 +355,10 @@ class PlanarLOD:
             # joints the reference broke after a hand-off count with the pymunk tier's
             stats["broken"] += sum(r.meta["stats"]["broken"] for r in refs)
             stats["debris"] += sum(r.meta["stats"]["parts"] for r in refs)
+            closest = [r.meta["stats"]["closest_to_breaking"] for r in refs
+                       if "closest_to_breaking" in r.meta["stats"]]
+            if closest:  # on the joints the reference held (the tiers do not keep it)
+                stats["closest_to_breaking"] = max(closest, key=lambda c: c["fraction"])
             notes += list(dict.fromkeys(n for r in refs for n in r.notes))
         step = (sum(s.step_seconds for s in lin) + st.step_seconds
                 + sum(r.timing.get("step_seconds", 0.0) for r in refs))
