@@ -217,6 +217,11 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                             uses[i].reason + "; the reference failed")
             continue
         ref_stats.append(result)
+        # progress for logs: the linear tier's frames are done long before these
+        names = [trees[i].name for i in members]
+        log(f"reference: {names[0]}{f' and {len(names) - 1} more' if len(names) > 1 else ''} "
+            f"simulated from t = {t0:.2f} s in "
+            f"{sum(result.timing.get(k, 0.0) for k in TIMED):.1f} s")
         start = math.ceil(round(t0 / ref.h) / ref.spf - 1e-9)
         for i in members:
             take(i, result.motions[trees[i].name], start)
@@ -284,6 +289,9 @@ def _chunk_progress(progress, k: int, total: int):
         progress(k * frames + done, total * frames)
 
     return tick
+
+
+TIMED = ("step_seconds", "update_seconds", "compile_seconds")  # a reference run's cost
 
 
 def merge_stats(stats: list[Stats]) -> Stats:
@@ -359,7 +367,14 @@ class PlanarLOD:
                        if "closest_to_breaking" in r.meta["stats"]]
             if closest:  # on the joints the reference held (the tiers do not keep it)
                 stats["closest_to_breaking"] = max(closest, key=lambda c: c["fraction"])
-            notes += list(dict.fromkeys(n for r in refs for n in r.notes))
+            from .reference import FREE_PART_COUNTS, free_part_notes
+
+            # one set of notes for all hand-overs: the same words once, the counts summed
+            own = [set(free_part_notes(r.meta["stats"])) for r in refs]
+            notes += list(dict.fromkeys(n for r, o in zip(refs, own) for n in r.notes
+                                        if n not in o))
+            notes += free_part_notes({k: sum(r.meta["stats"][k] for r in refs)
+                                      for k in FREE_PART_COUNTS})
         step = (sum(s.step_seconds for s in lin) + st.step_seconds
                 + sum(r.timing.get("step_seconds", 0.0) for r in refs))
         update = (sum(s.update_seconds for s in lin) + st.update_seconds

@@ -177,6 +177,28 @@ def floored_inertia(inertia: np.ndarray) -> np.ndarray:
     return (vec * lam) @ vec.T
 
 
+FREE_PART_COUNTS = ("broken", "clamped", "split", "damping_scaled")
+
+
+def free_part_notes(stats: dict) -> list[str]:
+    """The notes on breaks and on what free parts needed, from one run's
+    `stats` or the sums of several runs' (the planar LOD's hand-overs)."""
+    notes = []
+    if stats["broken"]:
+        notes.append(f"{stats['broken']} joints broke; the parts fell on as free bodies")
+    if stats["clamped"]:
+        notes.append(f"free parts' spin clamped at {MAX_SPIN:.0f} rad/s on {stats['clamped']} "
+                     "body updates")
+    if stats["split"]:
+        notes.append(f"steps split in up to {MAX_SUBSTEPS} where free parts spun faster than "
+                     f"{SPIN_PER_STEP:g} rad per step, on {stats['split']} model-steps")
+    if stats["damping_scaled"]:
+        notes.append(f"structural damping of free parts scaled down on "
+                     f"{stats['damping_scaled']} steps, to what an explicit step can remove "
+                     "without overshoot")
+    return notes
+
+
 def restitution_damping(e: float) -> float:
     """Damping ratio of a linear contact whose coefficient of restitution is `e`."""
     if e <= 0:
@@ -1072,12 +1094,14 @@ class ReferenceSolver:
 
     def meta(self) -> dict:
         """Settings, counts and notes for the bake's metadata (deterministic)."""
-        f1 = max((t.rig.first_frequency for t in self.trees), default=0.0)
         st = self.stats
+        # the same words in every run at one step, so that the planar LOD's
+        # many hand-overs merge into one set of notes (free_part_notes)
         notes = [(f"reference: MuJoCo {mujoco.__version__}, discrete (stiffness-implicit) "
                   f"integrator, h = {self.h * 1e3:.4g} ms, loads every "
                   f"{self.dt_force * 1e3:.4g} ms: numerical damping adds about "
-                  f"{math.pi * f1 * self.h:.2g} to the damping ratio of a {f1:.3g} Hz mode"),
+                  f"{math.pi * self.h:.2g} x f (Hz) to the damping ratio of a mode of "
+                  "frequency f"),
                  ("reference: joints are two perpendicular hinges (no twist); the cone limit "
                   "is a square in the two swing angles; bones of different trees do not collide")]
         if self.scene.explosions:
@@ -1088,17 +1112,6 @@ class ReferenceSolver:
                          "twig peaks and breaks converge only near 1/64000 s (--timestep)")
         if st.limited:
             notes.append(cap_note(st))
-        if st.broken:
-            notes.append(f"{st.broken} joints broke; the parts fell on as free bodies")
-        if st.clamped:
-            notes.append(f"free parts' spin clamped at {MAX_SPIN:.0f} rad/s on {st.clamped} "
-                         "body updates")
-        if st.split:
-            notes.append(f"steps split in up to {MAX_SUBSTEPS} where free parts spun faster than "
-                         f"{SPIN_PER_STEP:g} rad per step, on {st.split} model-steps")
-        if st.damping_scaled:
-            notes.append(f"structural damping of free parts scaled down on {st.damping_scaled} "
-                         "steps, to what an explicit step can remove without overshoot")
         stats = {"steps": st.steps, "updates": st.updates, "models": len(self.groups),
                  "bodies": st.bodies, "bones": self.n, "rebuilds": st.rebuilds,
                  "parts": st.parts, "limited": st.limited, "broken": st.broken,
@@ -1108,5 +1121,6 @@ class ReferenceSolver:
             frac, tree, path, when = st.closest
             stats["closest_to_breaking"] = {"fraction": round(frac, 4), "tree": tree,
                                             "segment": path, "time_s": round(when, 4)}
+        notes += free_part_notes(stats)
         return {"substep": self.h, "force_interval": self.dt_force,
                 "integrator": "discrete", "stats": stats, "notes": notes}
