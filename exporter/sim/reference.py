@@ -185,7 +185,8 @@ def free_part_notes(stats: dict) -> list[str]:
     `stats` or the sums of several runs' (the planar LOD's hand-overs)."""
     notes = []
     if stats["broken"]:
-        notes.append(f"{stats['broken']} joints broke; the parts fell on as free bodies")
+        joints = "joint" if stats["broken"] == 1 else "joints"
+        notes.append(f"{stats['broken']} {joints} broke; the parts fell on as free bodies")
     if stats["clamped"]:
         notes.append(f"free parts' spin clamped at {MAX_SPIN:.0f} rad/s on {stats['clamped']} "
                      "body updates")
