@@ -11,6 +11,9 @@ bakes alone (independent of either solver's bookkeeping):
 - centre of mass of the tree (its height at the event and the highest it
   reaches after);
 - the events (cut, hinge snap, breaks), broken joints, how far parts land;
+- peak displacement of any segment end (% of height), and the tree's peak
+  sway: of the segments still joined to the stump at the end (a broken
+  twig's fall dominates the first);
 - felling: time from the cut to the stem touching the ground, resting
   azimuth of the stem; boxes: the highest point a box reaches after a hit.
 
@@ -58,6 +61,23 @@ def tree_energy(tree, fps: float) -> dict:
     return {"energy": e, "ratio": e / max(e[0], 1e-12), "com": com, "mids": mids}
 
 
+def still_attached(tb, events) -> np.ndarray:
+    """Segments (S,) bool still joined to the stump at the end: neither a
+    broken joint's segment nor anything it carries, and the tree not
+    uprooted."""
+    gone = np.zeros(tb.n_segments, dtype=bool)
+    if any(e["kind"] == "uprooted" for e in events):
+        return ~gone
+    index = {p: s for s, p in enumerate(tb.paths)}
+    for e in events:
+        if e["kind"] == "broke" and e.get("segment") in index:
+            gone[index[e["segment"]]] = True
+    for s in range(tb.n_segments):  # parents come first
+        p = tb.seg_parent[s]
+        gone[s] |= p >= 0 and gone[p]
+    return ~gone
+
+
 def measure(bake, scene) -> dict:
     out = {"trees": []}
     for tb in bake.trees:
@@ -68,6 +88,9 @@ def measure(bake, scene) -> dict:
         broken = sum(1 for e in events if e["kind"] in ("broke", "uprooted"))
         base = tb.rest_base
         reach = float(np.linalg.norm(en["mids"][-1, :, :2] - base[0, :2], axis=1).max())
+        moved = np.linalg.norm(segment_ends(tb, np.arange(tb.n_segments))
+                               - tb.points[tb.seg_end], axis=-1)  # (F, S) m
+        attached = still_attached(tb, events)
         out["trees"].append({
             "name": tb.name, "max_energy_ratio": round(float(en["ratio"].max()), 4),
             "at_frame": int(np.argmax(en["ratio"])),
@@ -76,9 +99,11 @@ def measure(bake, scene) -> dict:
             "com_end": round(float(en["com"][-1, 2]), 3),
             "broken": broken, "events": [Event.from_record(e).text() for e in events][:6],
             "farthest_part_m": round(reach, 2),
-            "peak_displacement_pct": round(100 * float(np.linalg.norm(
-                segment_ends(tb, np.arange(tb.n_segments)) - tb.points[tb.seg_end],
-                axis=-1).max()) / tb.height, 2),
+            "peak_displacement_pct": round(100 * float(moved.max()) / tb.height, 2),
+            # the tree's own sway: the parts still on it (a falling twig's
+            # fall is not the blast's effect on the tree)
+            "peak_sway_pct": round(100 * float(moved[:, attached].max(initial=0.0))
+                                   / tb.height, 2),
             "audit": bake.meta.get("energy", {}).get(tb.name, {}),
             **{k: v for k, v in event_metrics(tb, bake.fps).items() if k != "broken"}})
     if bake.objects is not None:
@@ -122,7 +147,7 @@ def main() -> None:
                       f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
                       f"{t['com_max_after_start']:.2f} -> end {t['com_end']:.2f}  broken "
                       f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m  peak "
-                      f"{t['peak_displacement_pct']:.1f} %  audit gain "
+                      f"{t['peak_displacement_pct']:.1f} % (sway {t['peak_sway_pct']:.1f} %)  audit gain "
                       f"{t['audit'].get('max_gain_fraction', 0):.2%}", flush=True)
                 if "to_ground_s" in t:
                     print(f"{'':<17}stem on the ground {t['to_ground_s']:.3f} s after the cut, "
