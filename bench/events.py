@@ -147,7 +147,8 @@ def main() -> None:
                       f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
                       f"{t['com_max_after_start']:.2f} -> end {t['com_end']:.2f}  broken "
                       f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m  peak "
-                      f"{t['peak_displacement_pct']:.1f} % (sway {t['peak_sway_pct']:.1f} %)  audit gain "
+                      f"{t['peak_displacement_pct']:.1f} % (sway {t['peak_sway_pct']:.1f} %)  "
+                      "audit gain "
                       f"{t['audit'].get('max_gain_fraction', 0):.2%}", flush=True)
                 if "to_ground_s" in t:
                     print(f"{'':<17}stem on the ground {t['to_ground_s']:.3f} s after the cut, "
