@@ -51,6 +51,8 @@ SETTINGS = {  # name: bake_scene keyword arguments (quality: a level, or a level
     "lod": {"solver": "planar", "quality": "default"},
     "lod-draft": {"solver": "planar", "quality": "draft"},
     "lod-final": {"solver": "planar", "quality": "final"},
+    # default with the linear tier at 1/60 s (the willow's twigs: its error is the step's)
+    "lod-60hz": {"solver": "planar", "quality": ("default", {"linear_rate": 60.0})},
     "pymunk": {"solver": "planar", "quality": ("default", {"tier": "pymunk",
                                                           "bone_length": 1 / 30})},
     # the reference with 0.1.0's default bones (>= 1/30 of the height), as the issue measured
