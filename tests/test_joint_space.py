@@ -64,6 +64,22 @@ def test_loads_do_the_work_of_the_forces(js):
     assert tau @ v == pytest.approx((force * pose.vcom.T).sum(), rel=1e-10)
 
 
+def test_tip_shift_is_the_tips_first_order_motion(js):
+    """tip_shift(dq) against the exact kinematics: central differences of
+    every bone's tip (pivot + R (tip0 - pivot0)) about the grown shape."""
+    rng = np.random.default_rng(8)
+    dq = rng.normal(size=js.n) * 1e-6
+    zero = np.zeros(js.n)
+    b = js.bones
+
+    def tips(q):
+        pose = js.pose(js.kinematics(q, zero), q, loads=False)
+        return pose.pivot + np.einsum("ijb,bj->ib", pose.rot, b.tip0 - b.pivot0)
+
+    num = (tips(dq) - tips(-dq)) / 2
+    assert np.allclose(js.tip_shift(dq), num, rtol=1e-5, atol=1e-6 * np.abs(num).max())
+
+
 def test_damping_is_each_limbs_block_of_the_mass_matrix(js):
     rng = np.random.default_rng(3)
     v = rng.normal(size=js.n)

@@ -154,6 +154,7 @@ class JointSpace:
         self.axis0 = axis0.T.copy()
         self.com_arm = (bones.com0 - bones.pivot0).T.copy()
         self.com0 = bones.com0.T.copy()
+        self.tip0 = bones.tip0.T.copy()
         self.inertia = bones.inertia.transpose(1, 2, 0).copy()  # (3, 3, B)
         self.roots = np.nonzero(~has)[0]
         self.parent_or_self = np.where(has, bones.parent, np.arange(nb))
@@ -197,6 +198,16 @@ class JointSpace:
         own[6:9] = v0 * self.n0 + v1 * self.n1
         own[9:12] = v0 * self.cp0 + v1 * self.cp1
         return self.sums.prefix(own)
+
+    def tip_shift(self, dq: np.ndarray) -> np.ndarray:
+        """How far (3, B) m each bone's tip moves, to first order about the
+        grown shape, when the hinge angles change by `dq` (2B,) rad: the
+        hinges below it turning the tip about their pivots."""
+        own = np.empty((6, self.bones.n))
+        own[0:3] = dq[0::2] * self.n0 + dq[1::2] * self.n1
+        own[3:6] = dq[0::2] * self.cp0 + dq[1::2] * self.cp1
+        run = self.sums.prefix(own)
+        return cross_rows(run[0:3], self.tip0) - run[3:6]
 
     def pose(self, kin: np.ndarray, q: np.ndarray, loads: bool = True) -> Pose:
         """Bones' pose (rows, (3, B) and (3, 3, B)): rotations exp(rotation

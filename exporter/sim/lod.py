@@ -38,7 +38,7 @@ from .debris import MAX_SPIN
 from .solver import SolveResult, frame_timing
 from .chains.tier import StartState
 from .events import TIER, Event
-from .linear import LinearStats, LinearTier
+from .linear import ERROR_TOLERANCE, LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .quality import nonlinear_engine
@@ -349,6 +349,7 @@ class PlanarLOD:
         stats["linear_rebuilds"] = sum(s.rebuilds for s in lin)
         stats["linear_limited"] = sum(s.limited for s in lin)
         stats["linear_split"] = sum(s.split for s in lin)
+        stats["linear_parts"] = max((s.parts for s in lin), default=1)
         meta["stats"] = stats
         tiers = {}
         for (_, members), c in zip(chunks_plan(self.trees, self.qualities, scene), chunks):
@@ -417,6 +418,13 @@ def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: floa
     split = sum(s.split for s in linear)
     if split:
         notes.append(f"{split} linear steps were split in 8 while a blast acted")
+    refined = [r for s in linear for r in s.refined]
+    if refined:
+        t, tree, path, error = min(refined)
+        parts = max(s.parts for s in linear)
+        notes.append(f"linear steps split in up to {parts} for accuracy from t = {t:.3f} s "
+                     f"(the step's error estimate at {tree} {path}: {error:.2%} of its height, "
+                     f"past {ERROR_TOLERANCE:.2%})")
     if stats.refined:
         notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
                      "blast, a hit, a capped load or a fast spin acted (pivots drift with the "
