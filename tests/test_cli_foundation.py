@@ -54,3 +54,13 @@ def test_bad_input_exits_2_with_a_message(tmp_path, args, fragment):
 def test_bad_usage_exits_2():
     assert run("derive").returncode == 2
     assert run("no-such-command").returncode == 2
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_a_log_counts_the_bakes_frames_whatever_the_chunks(tmp_path, workers):
+    """The gusty preset (3,764 segments) simulates in two chunks; a log (not
+    a terminal) ends with the bake's own frame count, for any workers."""
+    r = run("bake", "preset:gusty", "--duration", "0.5", "--workers", workers,
+            "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert "simulating: 12/12 frames, done" in r.stderr  # 0.5 s at 24 fps

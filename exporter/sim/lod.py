@@ -270,10 +270,11 @@ def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, exten
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
             futures = [pool.submit(_simulate_chunk, [trees[i] for i in members], scene, q,
                                    extent) for q, members in plan]
+            frames = scene.frame_count - 1
             for k, fut in enumerate(futures):
                 results[k] = fut.result()
-                if progress is not None:
-                    progress(k + 1, len(plan))
+                if progress is not None:  # the bake's frames, in chunks' shares
+                    progress((k + 1) * frames // len(plan), frames)
     motions = {}
     for (_, members), res in zip(plan, results):
         for i, motion in zip(members, res.motions):
@@ -285,8 +286,8 @@ def _chunk_progress(progress, k: int, total: int):
     if progress is None:
         return None
 
-    def tick(done: int, frames: int) -> None:
-        progress(k * frames + done, total * frames)
+    def tick(done: int, frames: int) -> None:  # the bake's frames, in chunks' shares
+        progress((k * frames + done) // total, frames)
 
     return tick
 
