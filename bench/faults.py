@@ -27,6 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 SAPLING = ROOT / "grammars" / "sapling.lsys"
+SPRUCE = ROOT / "grammars" / "spruce.lsys"
 QUICK = ["--duration", "0.5", "--fps", "12", "--quality", "draft"]
 
 
@@ -52,11 +53,21 @@ def start(*args, env=None) -> subprocess.Popen:
                             start_new_session=True)
 
 
-def jobs_file(tmp: Path, count: int, duration: float, formats: str = '"glb"') -> Path:
-    body = (f'[defaults]\nduration = {duration}\nfps = 24\nquality = "draft"\n'
-            f'formats = [{formats}]\n')
+def jobs_file(tmp: Path, count: int, duration: float, formats: str = '"glb"',
+              busy: bool = False) -> Path:
+    """Sapling jobs; `busy`: jobs that are still simulating seconds after they
+    start (a signal must find them running). The sapling's linear tier bakes
+    20 s in well under a second, so those are the spruce on the pymunk tier
+    (about 1.4 s of CPU per simulated s)."""
+    body = (f'[defaults]\nduration = {duration}\nfps = 24\nformats = [{formats}]\n'
+            + ('' if busy else 'quality = "draft"\n'))
+    if busy:
+        (tmp / "busy.toml").write_text(
+            f'name = "busy"\n[[tree]]\ngrammar = "{SPRUCE}"\n[wind]\nspeed = 8.0\n'
+            '[quality]\nbase = "default"\ntier = "pymunk"\n')
+    source = 'scene = "busy.toml"' if busy else f'grammar = "{SAPLING}"'
     for i in range(count):
-        body += f'\n[[job]]\nname = "j{i}"\ngrammar = "{SAPLING}"\nseed = {i + 1}\n'
+        body += f'\n[[job]]\nname = "j{i}"\n{source}\nseed = {i + 1}\n'
     path = tmp / "jobs.toml"
     path.write_text(body)
     return path
@@ -145,7 +156,7 @@ def case_resume_code(tmp):
 
 def case_kill_worker(tmp):
     out = tmp / "out"
-    proc = start("batch", jobs_file(tmp, 4, 3.0), "--out", out, "-j", "2")
+    proc = start("batch", jobs_file(tmp, 4, 3.0, busy=True), "--out", out, "-j", "2")
     os.kill(wait_busy(proc, out, 2)[0], signal.SIGKILL)
     stdout, stderr = proc.communicate(timeout=600)
     s = json.loads((out / "batch-summary.json").read_text())
@@ -168,7 +179,7 @@ def case_worker_always_dies(tmp):
 
 def stop_with(tmp, sig):
     out = tmp / "out"
-    proc = start("batch", jobs_file(tmp, 4, 20.0), "--out", out, "-j", "2")
+    proc = start("batch", jobs_file(tmp, 4, 20.0, busy=True), "--out", out, "-j", "2")
     workers = wait_busy(proc, out, 2)
     t0 = time.time()
     os.kill(proc.pid, sig)
@@ -194,7 +205,7 @@ def case_sigterm(tmp):
 
 def case_kill_main(tmp):
     out = tmp / "out"
-    proc = start("batch", jobs_file(tmp, 4, 20.0), "--out", out, "-j", "2")
+    proc = start("batch", jobs_file(tmp, 4, 20.0, busy=True), "--out", out, "-j", "2")
     workers = wait_busy(proc, out, 2)
     os.kill(proc.pid, signal.SIGKILL)
     proc.communicate(timeout=60)
