@@ -262,6 +262,14 @@ class Explosion:
                                                                       1e-5))
         return ((cd * q + p * clearing) * area)[:, None] * direction
 
+    def passed(self, points: np.ndarray) -> float:
+        """Time (s) by which the positive phase has passed every point (N, 3) m."""
+        r = np.maximum(np.linalg.norm(points - self.position, axis=1), 1e-3)
+        z = r / self.charge ** (1.0 / 3.0)
+        mach = np.sqrt(1 + 6.0 / 7.0 * kinney_graham_overpressure(z))
+        return float((self.time + r / (SOUND_SPEED * mach)
+                      + kinney_graham_duration(z, self.charge)).max(initial=self.time))
+
     def reach(self, threshold: float = 500.0) -> float:
         """Distance (m) beyond which the peak overpressure is below
         `threshold` Pa (used to skip trees the blast cannot move)."""

@@ -59,6 +59,16 @@ ERROR_TOLERANCE = 5e-4
 MAX_PARTS = 8
 REARM = 0.25  # (a split step's local error falls as its square)
 STEP_TURN = 0.3  # rad: the most a tree's first mode turns in one step
+# A tree the reference took for large motion or a moment near breaking comes
+# back (lod.py) once it has stayed for RETURN_WINDOW within RETURN_FRACTION
+# of every limit above (hysteresis: it does not bounce between engines),
+# intact, with no hinge turning more than RETURN_TURN per step of this tier
+# (a blast's twig ringing at tens of Hz, which this step would not resolve,
+# has died down first).
+RETURN_FRACTION = 0.5
+RETURN_WINDOW = 0.5  # s
+RETURN_TURN = 0.02  # rad per step
+RETURN_DETAIL = "to linear: back in the linear range"
 
 
 @dataclass
@@ -98,10 +108,14 @@ class LinearStats:
 class LinearTier:
     """The linear tier for some trees of one quality. `pymunk_substeps`: the
     pymunk tier's substeps per frame (a tree handed over at a step starts
-    there at the substep at or before it)."""
+    there at the substep at or before it). With `state` (hinge angles and
+    rates (2B,), rad and rad/s from the grown shape), the trees start from
+    it at frame `start_frame` (coming back from the reference), else at rest
+    at frame 0."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 pymunk_substeps: int, log=None):
+                 pymunk_substeps: int, log=None, start_frame: int = 0,
+                 state: tuple[np.ndarray, np.ndarray] | None = None):
         self.scene, self.quality, self.loads = scene, quality, loads
         self.log = log or (lambda msg: None)
         self.trees = list(trees)
@@ -122,13 +136,13 @@ class LinearTier:
         self.members = list(range(len(self.trees)))
         self.ledger = Ledger(frames, len(self.trees))
         self.load_work = LoadWork(trapezoid=True)
-        self.t = 0.0
-        self.step = 0  # whole steps done
+        self.step = start_frame * self.spf  # whole steps done
+        self.t = self.step * self.h
         self.part, self.parts = 0, 1  # parts of the current step done, and its parts
         self.blast_step = False
         self.armed = True  # the error estimate may split the steps
-        self._build(np.zeros(0), np.zeros(0))
-        self._record(0)
+        self._build(*(state if state is not None else (np.zeros(0), np.zeros(0))))
+        self._record(start_frame)
 
     # ------------------------------------------------------------------
     # the system of the member trees

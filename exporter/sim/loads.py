@@ -108,6 +108,10 @@ class SceneLoads:
                 return True
         return False
 
+    def blasts_passed(self, t: float, points: np.ndarray) -> bool:
+        """Whether every blast's pulse has passed all `points` (N, 3) m by t s."""
+        return all(e.passed(points) < t for e in self.explosions)
+
     def quiet_after(self, centre: np.ndarray, radius: float, height: float) -> float:
         """Time (s) after which no time-varying load reaches a tree whose
         crown fits in a vertical cylinder (centre xy, radius, height): 0 if

@@ -21,27 +21,25 @@ projectiles (which can hit any tree) run as one chunk.
 
 from __future__ import annotations
 
-import os
 import math
+import os
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
 from ..errors import SimulationError
 from ..scene import Scene
-from .quality import Quality
-from .common import SimTree, TreeMotion
 from .chains import PymunkTier, Stats
 from .chains.forces import MAX_REFINE
-from .common import cap_note
-from .debris import MAX_SPIN
-from .solver import SolveResult, frame_timing
 from .chains.tier import StartState
+from .common import SimTree, TreeMotion, cap_note
+from .debris import MAX_SPIN
 from .events import TIER, Event
-from .linear import ERROR_TOLERANCE, LinearStats, LinearTier
+from .linear import ERROR_TOLERANCE, HandOff, LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
-from .quality import nonlinear_engine
+from .quality import Quality, nonlinear_engine
+from .solver import SolveResult, frame_timing
 
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
@@ -60,7 +58,7 @@ class TierUse:
 class ChunkResult:
     motions: list[TreeMotion]
     stats: Stats  # the pymunk tier's (all its instances in the chunk)
-    linear: LinearStats | None
+    linear: list[LinearStats]  # the linear tier's, then those of trees given back to it
     tiers: list[TierUse]
     h: float  # the pymunk tier's substep, s
     dt_update: float  # its load interval, s
@@ -128,15 +126,26 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     lin = LinearTier([trees[i] for i in lin_idx], scene, quality, loads, substeps, log) \
         if lin_idx else None
     pym: list[tuple[PymunkTier, list[int]]] = []
-    ref_runs: list[tuple] = []  # (trees, start s, (q, v) or None, the HandOff or None)
+    # (trees, start s, (q, v) or None, the HandOff or None, work done before, J)
+    ref_runs: list[tuple] = []
     first = [i for i, p in enumerate(in_nonlinear) if p]
     if first and engine_for("projectile") == "pymunk":
         tier = PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
         tier.begin()
         pym.append((tier, first))
     elif first:
-        ref_runs.append((first, 0.0, None, None))
+        ref_runs.append((first, 0.0, None, None, 0.0))
     uses = [TierUse(engine_for("projectile") if p else "linear") for p in in_nonlinear]
+
+    def pymunk_from(group: list[tuple[int, HandOff]]) -> tuple[PymunkTier, list[int]]:
+        """A pymunk tier for trees handed over at one substep."""
+        members = [i for i, _ in group]
+        tier = PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
+        tier.begin(group[0][1].substep,
+                   StartState(np.concatenate([ho.rot for _, ho in group]),
+                              np.concatenate([ho.omega for _, ho in group])))
+        return tier, members
+
     handed: list = []
     for f in range(1, frames):
         if lin is not None:
@@ -147,18 +156,15 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 if to == "pymunk":
                     to_pymunk.setdefault(ho.substep, []).append((i, ho))
                 else:  # the reference's hinges are the linear tier's coordinates
-                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho))
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho,
+                                     float(lin.ledger.running[ho.tree])))
                 uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason)
                 handed.append(Event(ho.time, trees[i].name, TIER, "",
                                     f"to {to}: {ho.reason}"))
                 log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
                     f"({ho.reason})")
-            for substep, group in to_pymunk.items():
-                members = [i for i, _ in group]
-                tier = PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
-                tier.begin(substep, StartState(np.concatenate([ho.rot for _, ho in group]),
-                                               np.concatenate([ho.omega for _, ho in group])))
-                pym.append((tier, members))
+            for group in to_pymunk.values():
+                pym.append(pymunk_from(group))
         for tier, _ in pym:
             tier.advance_frame(f)
         if progress is not None:
@@ -169,7 +175,9 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         for k, m in enumerate(lin.motions()):
             motions[lin_idx[k]] = m
 
-    def take(i: int, m: TreeMotion, start: int) -> None:
+    def take(i: int, m: TreeMotion, start: int, work_before: float) -> None:
+        """Tree i's frames from `start` on are m's; `work_before` J: the
+        work done on it before m's engine took it (the audit goes on)."""
         if motions[i] is None:
             motions[i] = m
             return
@@ -177,25 +185,79 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         mine.quaternions[start:] = m.quaternions[start:]
         mine.pivots[start:] = m.pivots[start:]
         mine.events.extend(m.events)
-        # the audit goes on: the work done in the linear tier carries over
         mine.energy[start:] = m.energy[start:]
-        mine.work[start:] = m.work[start:] + lin.ledger.running[lin_idx.index(i)]
-        mine.extra_times, mine.extra_quaternions = m.extra_times, m.extra_quaternions
-        mine.extra_pivots = m.extra_pivots
+        mine.work[start:] = m.work[start:] + work_before
+        # sub-frame samples: the earlier engine's before `start`, m's after
+        t_start = start / scene.fps
+        keep = mine.extra_times < t_start
+        if m.extra_quaternions is None or not len(m.extra_times):
+            mine.extra_times = mine.extra_times[keep]
+            if mine.extra_quaternions is not None:
+                mine.extra_quaternions = mine.extra_quaternions[keep]
+                mine.extra_pivots = mine.extra_pivots[keep]
+        elif mine.extra_quaternions is None or not keep.any():
+            mine.extra_times, mine.extra_quaternions = m.extra_times, m.extra_quaternions
+            mine.extra_pivots = m.extra_pivots
+        else:
+            mine.extra_times = np.concatenate([mine.extra_times[keep], m.extra_times])
+            mine.extra_quaternions = np.concatenate([mine.extra_quaternions[keep],
+                                                     m.extra_quaternions])
+            mine.extra_pivots = np.concatenate([mine.extra_pivots[keep], m.extra_pivots])
 
     for tier, members in pym:
         start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
         for i, m in zip(members, tier.motions()):
-            take(i, m, start)
+            take(i, m, start,
+                 float(lin.ledger.running[lin_idx.index(i)]) if i in lin_idx else 0.0)
+
+    def linear_from(i: int, f_back: int, q: np.ndarray, v: np.ndarray, work_before: float):
+        """Tree i in a linear tier of its own from frame f_back, with the
+        reference's hinge angles and rates there (its coordinates: no jump),
+        to the end or until it leaves again: then to the reference (a run
+        queued) or a pymunk tier (run here), `work_before` J plus the tier's
+        own carried over. The tier and those pymunk tiers."""
+        t_back = f_back / scene.fps
+        log(f"t = {t_back:.3f} s: {trees[i].name} is back in the linear range: "
+            "the linear tier takes it again")
+        uses[i] = TierUse(f"{uses[i].tier}, then linear", uses[i].switch,
+                          f"{uses[i].reason}; back at {t_back:.3f} s")
+        tier = LinearTier([trees[i]], scene, quality, loads, substeps, log, f_back, (q, v))
+        later = []
+        for f in range(f_back + 1, frames):
+            for ho in tier.advance_frame(f):
+                to = engine_for(ho.kind)
+                work = work_before + float(tier.ledger.running[0])
+                if to == "pymunk":
+                    p_tier, _ = pymunk_from([(i, ho)])
+                    for ff in range(math.ceil(ho.substep / p_tier.spf - 1e-9), frames):
+                        p_tier.advance_frame(ff)
+                    later.append((p_tier, [i], work))
+                else:
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, work))
+                uses[i] = TierUse(f"{uses[i].tier}, then {to}", uses[i].switch,
+                                  f"{uses[i].reason}; to {to} at {ho.time:.3f} s: {ho.reason}")
+                handed.append(Event(ho.time, trees[i].name, TIER, "", f"to {to}: {ho.reason}"))
+                log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
+                    f"({ho.reason})")
+        return tier, later
+
     objects = None
     ref_stats = []
-    for members, t0, state, ho in ref_runs:
+    returned: list[LinearStats] = []  # the linear tiers of trees the reference gave back
+    returned_steps = 0  # their segments x steps
+    k = 0
+    while k < len(ref_runs):  # a tree given back may leave again: runs are appended
+        members, t0, state, ho, work_before = ref_runs[k]
+        k += 1
         from .reference import ReferenceSolver
 
         ref = ReferenceSolver([trees[i] for i in members], scene, quality, loads, log=log,
                               timestep=quality.reference_step)
+        # a tree taken for large motion or a moment near breaking comes back
+        # once it is in the linear range again (not with projectiles about)
+        back = lin.h if ho is not None and ho.kind in ("turn", "cone", "break") else None
         try:
-            result = ref.run(None, t0, state)
+            result = ref.run(None, t0, state, hand_back=back)
         except SimulationError as exc:
             # the reference at a coarse step could not hold it: the pymunk tier takes the
             # trees from the hand-over (or from the start: trees a projectile reaches)
@@ -211,7 +273,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             pym.append((tier, members))
             start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
             for i, m in zip(members, tier.motions()):
-                take(i, m, start)
+                take(i, m, start, work_before)
                 uses[i] = TierUse("pymunk (the reference failed)") if ho is None else \
                     TierUse("linear, then pymunk", uses[i].switch,
                             uses[i].reason + "; the reference failed")
@@ -224,10 +286,22 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             f"{sum(result.timing.get(k, 0.0) for k in TIMED):.1f} s")
         start = math.ceil(round(t0 / ref.h) / ref.spf - 1e-9)
         for i in members:
-            take(i, result.motions[trees[i].name], start)
+            take(i, result.motions[trees[i].name], start, work_before)
         if result.objects is not None:
             o = result.objects
             objects = (o.shapes, o.sizes, o.positions, o.rotations)
+        if result.handed_back is not None:
+            (i,) = members
+            f_back, q, v = result.handed_back
+            work_back = float(motions[i].work[f_back])
+            tier, later = linear_from(i, f_back, q, v, work_back)
+            returned.append(tier.stats)
+            returned_steps += trees[i].rig.model.n_segments * tier.stats.steps
+            take(i, tier.motions()[0], f_back, work_back)
+            for p_tier, p_members, p_work in later:
+                pym.append((p_tier, p_members))
+                p_start = p_tier.first_frame + (1 if p_tier.substep_start % p_tier.spf else 0)
+                take(i, p_tier.motions()[0], p_start, p_work)
     for e in handed:
         i = next(k for k, t in enumerate(trees) if t.name == e.tree)
         motions[i].events.insert(0, e)
@@ -243,8 +317,9 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 for tier, members in pym)
     if lin is not None:
         steps += sum(trees[i].rig.model.n_segments for i in lin_idx) * lin.stats.steps
-    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats)
-    return ChunkResult(motions, stats, lin.stats if lin is not None else None, uses, h,
+    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats) + returned_steps
+    linear = ([lin.stats] if lin is not None else []) + returned
+    return ChunkResult(motions, stats, linear, uses, h,
                        pym_h.dt_update if pym_h is not None else h,
                        lin.h if lin is not None else None,
                        sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats)
@@ -335,7 +410,7 @@ class PlanarLOD:
         motions, chunks = simulate(self.trees, self.qualities, scene, self.extent, self.workers,
                                    self.log, progress)
         st = merge_stats([c.stats for c in chunks])
-        lin = [c.linear for c in chunks if c.linear is not None]
+        lin = [s for c in chunks for s in c.linear]
         quality = next(q for t, q in zip(self.trees, self.qualities) if t.active)
         meta = {"substep": min(c.h for c in chunks),
                 "force_interval": min(c.dt_update for c in chunks), "chunks": len(chunks)}

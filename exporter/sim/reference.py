@@ -132,7 +132,6 @@ from ..bake import ObjectsBake
 from ..errors import SimulationError
 from ..rotations import cross
 from ..scene import Scene
-from .quality import Quality
 from .audit import Ledger, LoadWork, bone_energy, per_tree
 from .common import (
     MAX_ANGULAR_SPEED,
@@ -146,9 +145,20 @@ from .common import (
 )
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
-from .events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
+from .events import AT_REST, BROKE, CUT, HINGE, TIER, UPROOTED, Event
+from .linear import (
+    BREAK_MARGIN,
+    CONE_FRACTION,
+    CONTACT_MARGIN,
+    MAX_TURN,
+    RETURN_DETAIL,
+    RETURN_FRACTION,
+    RETURN_TURN,
+    RETURN_WINDOW,
+)
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
+from .quality import Quality
 from .solver import SolveResult, frame_timing
 
 DEFAULT_TIMESTEP = 1 / 2000  # s
@@ -891,12 +901,17 @@ class ReferenceSolver:
     # running
 
     def run(self, progress=None, start: float = 0.0,
-            state: tuple[np.ndarray, np.ndarray] | None = None) -> SolveResult:
+            state: tuple[np.ndarray, np.ndarray] | None = None,
+            hand_back: float | None = None) -> SolveResult:
         """Simulate the scene; per active tree, the bones' motion at every frame.
         With `state`, from time `start` (s, rounded to a step) and the
         hinges' angles and rates (q, v: (2B,), bone b's hinges at 2b, 2b + 1,
         rad and rad/s from the grown shape) the linear tier handed over: its
         coordinates are exactly these hinges. Frames before are left zero.
+        With `hand_back` (the linear tier's step, s), the run stops at the
+        first frame at which its trees have stayed back in the linear range
+        for linear.RETURN_WINDOW (`_back_in_range`); the result's `handed_back`
+        holds that frame and the hinges' angles and rates there.
 
         Each step: mj_step1 (kinematics), then, at force updates, read the
         bones, record a frame, handle events and write the held loads
@@ -919,6 +934,8 @@ class ReferenceSolver:
         steps = (frames - 1) * self.spf
         self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
         first = 0
+        back = None  # (frame, q, v) where the trees went back to the linear tier
+        self.returning = 0.0  # s the trees have been back in the linear range
         self.samples: list = []
         self.extra: list[list] = [[] for _ in self.trees]
         if state is not None:
@@ -962,6 +979,11 @@ class ReferenceSolver:
                             progress(f, frames - 1)
                     if step == steps:
                         break
+                    if hand_back is not None and self._back_in_range(t, hand_back):
+                        back = (f, *self._hinges())
+                        self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL)
+                                           for tr in self.trees)
+                        break
                 if self._events(t):
                     self._check(t)
                 if not self.attached.all():
@@ -1004,7 +1026,50 @@ class ReferenceSolver:
             timing.update(segment_steps=sum(t.rig.model.n_segments for t in self.trees)
                           * len(steps), **frame_timing(per_frame, self.spf))
         return SolveResult(motions, self.objects(), meta, notes,
-                           {t.name: "reference" for t in self.trees}, timing)
+                           {t.name: "reference" for t in self.trees}, timing, back)
+
+    def _back_in_range(self, t: float, h_linear: float) -> bool:
+        """Whether the trees have been back in the linear tier's range, with
+        margin, for RETURN_WINDOW s up to this frame (at t s): every joint
+        holding and none cut, no projectile, every blast's pulse past; every
+        bone turned less than RETURN_FRACTION of linear.MAX_TURN from rest,
+        every hinge within RETURN_FRACTION of its cone fraction, every
+        moment within RETURN_FRACTION of BREAK_MARGIN of its strength, every
+        tip clear of the ground; and no hinge turning more than RETURN_TURN
+        per linear step of `h_linear` s (motion its step resolves: a blast's
+        twig ringing stays here until it has died down)."""
+        if (not self.attached.all() or any(self.cut_state)
+                or any(g.projectiles for g in self.groups)
+                or not self.loads.blasts_passed(t, self.com[:self.n])):
+            self.returning = 0.0
+            return False
+        n = self.n
+        rot = self.rot[:n]
+        cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+        q, v = self._hinges()
+        moment = np.concatenate([self._moments(g) for g in self.groups])
+        order = np.concatenate([g.bones for g in self.groups])
+        frac = np.zeros(n)
+        frac[order] = moment / np.maximum(self.strength[order], 1e-12)
+        tip_z = self._pivots()[:, 2] + np.einsum("bj,bj->b", rot[:, 2], self.tip0 - self.pivot0)
+        ok = (np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
+              and np.all(np.abs(q).reshape(-1, 2) < RETURN_FRACTION * CONE_FRACTION * self.cone)
+              and np.all(frac < RETURN_FRACTION * BREAK_MARGIN)
+              and np.all((tip_z > self.radius + 2 * CONTACT_MARGIN)
+                         | (tip_z >= self.tip0[:, 2] - 1e-3))
+              and np.all(np.abs(v) * h_linear < RETURN_TURN))
+        self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
+        return self.returning >= RETURN_WINDOW - 1e-9
+
+    def _hinges(self) -> tuple[np.ndarray, np.ndarray]:
+        """The hinges' angles and rates (2B,), rad and rad/s from the grown
+        shape: the linear tier's coordinates."""
+        q, v = np.zeros((self.n, 2)), np.zeros((self.n, 2))
+        for g in self.groups:
+            has = g.hinge_qpos >= 0
+            q[g.bones] = np.where(has, g.data.qpos[np.maximum(g.hinge_qpos, 0)], 0.0)
+            v[g.bones] = np.where(has, g.data.qvel[np.maximum(g.hinge_dof, 0)], 0.0)
+        return q.reshape(-1), v.reshape(-1)
 
     def _set_hinges(self, q: np.ndarray, v: np.ndarray, t: float) -> None:
         """Start from hinge angles q and rates v (2B,), at time t."""

@@ -17,7 +17,9 @@ class SolveResult:
     deterministic facts for the bake (settings, counts); `notes`: what the
     solver adapted, clamped or left out, in words; `tiers`: per tree, which
     solver or tier moved it (and when it switched); `timing`: seconds and
-    per-frame costs, never in the bake file."""
+    per-frame costs, never in the bake file. `handed_back`: where a run
+    for the planar LOD stopped because its trees went back to the linear
+    tier: (frame, hinge angles (2B,) rad, rates (2B,) rad/s), else None."""
 
     motions: dict[str, TreeMotion]
     objects: object | None = None
@@ -25,6 +27,7 @@ class SolveResult:
     notes: list[str] = field(default_factory=list)
     tiers: dict[str, str] = field(default_factory=dict)
     timing: dict = field(default_factory=dict)
+    handed_back: tuple | None = None
 
 
 class Solver(Protocol):

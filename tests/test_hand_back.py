@@ -1,0 +1,81 @@
+"""A tree the planar LOD handed to the reference (MuJoCo) comes back to the
+linear tier once it is in the linear range again (issue 12: "handed back
+when it settles"): from the reference's own hinge angles and rates, without
+a jump, and it then follows what the reference alone would have done."""
+
+import numpy as np
+import pytest
+
+import treebake.sim.reference as reference
+from treebake.library import grammars_folder
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.sway import segment_ends
+
+
+def blast_scene():
+    """The explosion preset's spruce alone: 10 kg of TNT 12 m away loads a
+    joint past 80 % of its strength (the linear tier hands it over);
+    nothing breaks."""
+    return parse_scene({
+        "name": "spruce-blast", "duration": 4.0, "fps": 24,
+        "tree": [{"grammar": str(grammars_folder() / "spruce.lsys"), "position": [2.0, 12.0],
+                  "rotation": 40.0}],
+        "explosion": [{"position": [0.0, 0.0, 1.0], "time": 1.0, "charge": 10.0}]},
+        file="<hand-back>")
+
+
+@pytest.fixture(scope="module")
+def bakes():
+    scene = blast_scene()
+    back = bake_scene(scene)
+    keep = reference.RETURN_FRACTION
+    reference.RETURN_FRACTION = 0.0  # never back in range: the reference to the end
+    try:
+        stay = bake_scene(scene)
+    finally:
+        reference.RETURN_FRACTION = keep
+    return back, stay
+
+
+def tier_events(tree):
+    return [e for e in tree.info["events"] if e["kind"] == "tier"]
+
+
+def test_the_tree_comes_back_after_the_blast(bakes):
+    back, stay = bakes
+    (tree,) = back.trees
+    assert tree.info["solver"].startswith("linear, then reference, then linear at ")
+    left, came = tier_events(tree)
+    assert left["detail"].startswith("to reference:") and came["detail"].startswith("to linear:")
+    assert 1.0 < left["time"] < came["time"] < 3.5
+    assert stay.trees[0].info["solver"].startswith("linear, then reference at ")
+    assert back.meta["stats"]["broken"] == stay.meta["stats"]["broken"] == 0
+
+
+def test_it_follows_the_reference_from_its_state(bakes):
+    back, stay = bakes
+    (tree,), (ref,) = back.trees, stay.trees
+    f_back = round(tier_events(tree)[1]["time"] * back.fps)
+    a = segment_ends(tree, np.arange(tree.n_segments))
+    b = segment_ends(ref, np.arange(ref.n_segments))
+    off = np.linalg.norm(a - b, axis=-1).max(1) / ref.height
+    assert off[:f_back].max() == 0.0  # the same engines until the return
+    # the return frame is the reference's state (two kinematics of the same
+    # hinge angles), the next one a single step of the linear tier away
+    assert off[f_back] < 1e-6
+    assert off[f_back + 1] < 2e-4
+    # and then: against the reference at its 1/480 s, the linear tier at 1/24 s
+    assert off.max() < 1.5e-3, off.max()
+    # no jump: the frame-to-frame motion at the return is the reference's
+    step_a = np.linalg.norm(np.diff(a, axis=0), axis=-1).max(1)
+    step_b = np.linalg.norm(np.diff(b, axis=0), axis=-1).max(1)
+    assert abs(step_a[f_back] - step_b[f_back]) < 0.05 * step_b[f_back]
+
+
+def test_the_audit_runs_on_across_the_return(bakes):
+    back, stay = bakes
+    ea, eb = back.meta["energy"]["spruce"], stay.meta["energy"]["spruce"]
+    assert ea["max_gain_fraction"] < 0.02, ea
+    # the work the loads did is carried across both switches
+    assert abs(ea["external_work_j"] - eb["external_work_j"]) < 0.02 * eb["external_work_j"]
