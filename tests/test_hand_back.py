@@ -51,6 +51,8 @@ def test_the_tree_comes_back_after_the_blast(bakes):
     assert 1.0 < left["time"] < came["time"] < 3.5
     assert stay.trees[0].info["solver"].startswith("linear, then reference at ")
     assert back.meta["stats"]["broken"] == stay.meta["stats"]["broken"] == 0
+    assert back.meta["stats"]["returned"] == 1 and stay.meta["stats"]["returned"] == 0
+    assert any("came back to the linear tier" in n for n in back.meta["notes"])
 
 
 def test_it_follows_the_reference_from_its_state(bakes):

@@ -67,6 +67,7 @@ class ChunkResult:
     segment_steps: int  # simulated segments x steps (each tier at its own step)
     objects: tuple | None = None  # projectile tracks (shapes, sizes, positions, rotations)
     reference: list = field(default_factory=list)  # SolveResults of the reference's runs
+    came_back: list = field(default_factory=list)  # (time s, tree): back to the linear tier
 
 
 def chunks(trees: list[SimTree], qualities: list[Quality],
@@ -245,6 +246,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     ref_stats = []
     returned: list[LinearStats] = []  # the linear tiers of trees the reference gave back
     returned_steps = 0  # their segments x steps
+    came_back: list[tuple[float, str]] = []  # (time s, tree) of each return
     k = 0
     while k < len(ref_runs):  # a tree given back may leave again: runs are appended
         members, t0, state, ho, work_before = ref_runs[k]
@@ -297,6 +299,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             tier, later = linear_from(i, f_back, q, v, work_back)
             returned.append(tier.stats)
             returned_steps += trees[i].rig.model.n_segments * tier.stats.steps
+            came_back.append((f_back / scene.fps, trees[i].name))
             take(i, tier.motions()[0], f_back, work_back)
             for p_tier, p_members, p_work in later:
                 pym.append((p_tier, p_members))
@@ -322,7 +325,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     return ChunkResult(motions, stats, linear, uses, h,
                        pym_h.dt_update if pym_h is not None else h,
                        lin.h if lin is not None else None,
-                       sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats)
+                       sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats,
+                       came_back)
 
 
 def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, extent: np.ndarray,
@@ -434,6 +438,12 @@ class PlanarLOD:
                     f"{use.tier} at {use.switch:.3f} s ({use.reason})"
         notes = lod_notes(st, lin, quality, meta["substep"])
         refs = [r for c in chunks for r in c.reference]
+        back = sorted(b for c in chunks for b in c.came_back)
+        stats["returned"] = len(back)
+        if back:
+            notes.append(f"{len(back)} tree{'s' if len(back) > 1 else ''} came back to the "
+                         f"linear tier from the reference, back in its range (first: "
+                         f"{back[0][1]} at t = {back[0][0]:.3f} s)")
         if refs:
             meta["reference_runs"] = len(refs)
             meta["reference_step"] = quality.reference_step
