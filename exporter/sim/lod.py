@@ -277,8 +277,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             for i, m in zip(members, tier.motions()):
                 take(i, m, start, work_before)
                 uses[i] = TierUse("pymunk (the reference failed)") if ho is None else \
-                    TierUse("linear, then pymunk", uses[i].switch,
-                            uses[i].reason + "; the reference failed")
+                    TierUse(uses[i].tier.rsplit(", then reference", 1)[0] + ", then pymunk",
+                            uses[i].switch, uses[i].reason + "; the reference failed")
             continue
         ref_stats.append(result)
         # progress for logs: the linear tier's frames are done long before these
