@@ -69,6 +69,7 @@ RETURN_FRACTION = 0.5
 RETURN_WINDOW = 0.5  # s
 RETURN_TURN = 0.02  # rad per step
 RETURN_DETAIL = "to linear: back in the linear range"
+RETURNABLE = ("turn", "cone", "break")  # HandOff kinds whose trees may come back
 
 
 @dataclass
@@ -87,6 +88,7 @@ class HandOff:
     v: np.ndarray
     reason: str
     kind: str  # "turn", "cone" (large motion), "break", "ground", "cut" (events)
+    step_length: float = 0.0  # s, the linear tier's step (a tree coming back gets the same)
 
 
 @dataclass
@@ -340,7 +342,7 @@ class LinearTier:
             substep = int((self.step + self.part / self.parts) * self.ratio + 1e-9)
             out.append(HandOff(i, substep, self.t, rot_exact[0, lo:hi].copy(),
                                kin[6:9, lo:hi].T.copy(), q[2 * lo:2 * hi].copy(),
-                               self.v[2 * lo:2 * hi].copy(), reason, why_kind))
+                               self.v[2 * lo:2 * hi].copy(), reason, why_kind, self.h))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
             if keep else np.zeros(0, dtype=np.int64)
@@ -420,3 +422,31 @@ def pose_frames(bones: Bones, qs: np.ndarray):
             piv[:, :, b] = piv[:, :, p] + qrotate_rows(fr, arm)
     rot *= np.where(rot[3] < 0, -1.0, 1.0)
     return rot.transpose(1, 2, 0), piv.transpose(1, 2, 0)
+
+
+def hinges_from_pose(bones: Bones, rot: np.ndarray, omega: np.ndarray):
+    """The hinge angles q and rates v (2B,), rad and rad/s, of bones whose
+    rotations relative to rest are `rot` (B, 3, 3) and world angular
+    velocities `omega` (B, 3) rad/s: the inverse of pose_frames. Each joint's
+    turn relative to its parent, L = R_parent^T R = Rot(n0, q0) Rot(n1, q1),
+    takes the bone's axis a (n0, n1, a orthonormal, n1 = a x n0) to
+    sin q1 n0 - cos q1 sin q0 n1 + cos q1 cos q0 a; its relative spin in the
+    parent's rest frame is q0' n0 + q1' Rot(n0, q0) n1. A twist about the
+    bone (which these hinges cannot hold) is dropped."""
+    nb = bones.n
+    has = bones.parent >= 0
+    p = np.maximum(bones.parent, 0)
+    frame = np.where(has[:, None, None], rot[p], np.eye(3))
+    w_parent = np.where(has[:, None], omega[p], 0.0)
+    local = np.einsum("bji,bjk->bik", frame, rot)  # R_parent^T R
+    n0, n1 = bones.hinges[:, 0], bones.hinges[:, 1]
+    axis = np.cross(n0, n1)  # a = n0 x n1 for n1 = a x n0
+    turned = np.einsum("bij,bj->bi", local, axis)
+    q1 = np.arcsin(np.clip((turned * n0).sum(1), -1.0, 1.0))
+    q0 = np.arctan2(-(turned * n1).sum(1), (turned * axis).sum(1))
+    w = np.einsum("bji,bj->bi", frame, omega - w_parent)  # relative spin, parent's rest frame
+    c, s = np.cos(q0)[:, None], np.sin(q0)[:, None]
+    n1_turned = c * n1 + s * np.cross(n0, n1)  # Rot(n0, q0) n1 (n0 . n1 = 0)
+    q = np.stack([q0, q1], 1).reshape(2 * nb)
+    v = np.stack([(w * n0).sum(1), (w * n1_turned).sum(1)], 1).reshape(2 * nb)
+    return q, v

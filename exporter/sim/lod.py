@@ -35,7 +35,7 @@ from .chains.tier import StartState
 from .common import SimTree, TreeMotion, cap_note
 from .debris import MAX_SPIN
 from .events import TIER, Event
-from .linear import ERROR_TOLERANCE, HandOff, LinearStats, LinearTier
+from .linear import ERROR_TOLERANCE, RETURNABLE, HandOff, LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .quality import Quality, nonlinear_engine
@@ -145,6 +145,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         tier.begin(group[0][1].substep,
                    StartState(np.concatenate([ho.rot for _, ho in group]),
                               np.concatenate([ho.omega for _, ho in group])))
+        if all(ho.kind in RETURNABLE for _, ho in group):
+            tier.hand_back = group[0][1].step_length
         return tier, members
 
     handed: list = []
@@ -205,11 +207,22 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                                                      m.extra_quaternions])
             mine.extra_pivots = np.concatenate([mine.extra_pivots[keep], m.extra_pivots])
 
-    for tier, members in pym:
+    returns: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (tree, frame, q, v)
+
+    def take_pymunk(tier: PymunkTier, members: list[int], works: list[float]) -> None:
+        """A pymunk tier's frames for its trees; those it gave back queued."""
         start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
-        for i, m in zip(members, tier.motions()):
-            take(i, m, start,
-                 float(lin.ledger.running[lin_idx.index(i)]) if i in lin_idx else 0.0)
+        for i, m, w in zip(members, tier.motions(), works):
+            take(i, m, start, w)
+        if tier.handed_back is not None:
+            f_back, q, v = tier.handed_back
+            for k, i in enumerate(members):
+                lo, hi = 2 * tier.offsets[k], 2 * tier.offsets[k + 1]
+                returns.append((i, f_back, q[lo:hi], v[lo:hi]))
+
+    for tier, members in pym:
+        take_pymunk(tier, members, [float(lin.ledger.running[lin_idx.index(i)])
+                                    if i in lin_idx else 0.0 for i in members])
 
     def linear_from(i: int, f_back: int, q: np.ndarray, v: np.ndarray, work_before: float):
         """Tree i in a linear tier of its own from frame f_back, with the
@@ -247,8 +260,25 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     returned: list[LinearStats] = []  # the linear tiers of trees the reference gave back
     returned_steps = 0  # their segments x steps
     came_back: list[tuple[float, str]] = []  # (time s, tree) of each return
+    def back_to_linear(i: int, f_back: int, q: np.ndarray, v: np.ndarray) -> None:
+        """Tree i back in a linear tier from frame f_back (linear_from)."""
+        nonlocal returned_steps
+        work_back = float(motions[i].work[f_back])
+        tier, later = linear_from(i, f_back, q, v, work_back)
+        returned.append(tier.stats)
+        returned_steps += trees[i].rig.model.n_segments * tier.stats.steps
+        came_back.append((f_back / scene.fps, trees[i].name))
+        take(i, tier.motions()[0], f_back, work_back)
+        for p_tier, p_members, p_work in later:
+            pym.append((p_tier, p_members))
+            take_pymunk(p_tier, p_members, [p_work])
+
     k = 0
-    while k < len(ref_runs):  # a tree given back may leave again: runs are appended
+    # trees given back may leave again: returns and reference runs are appended
+    while returns or k < len(ref_runs):
+        if returns:
+            back_to_linear(*returns.pop(0))
+            continue
         members, t0, state, ho, work_before = ref_runs[k]
         k += 1
         from .reference import ReferenceSolver
@@ -257,7 +287,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                               timestep=quality.reference_step)
         # a tree taken for large motion or a moment near breaking comes back
         # once it is in the linear range again (not with projectiles about)
-        back = lin.h if ho is not None and ho.kind in ("turn", "cone", "break") else None
+        back = ho.step_length if ho is not None and ho.kind in RETURNABLE else None
         try:
             result = ref.run(None, t0, state, hand_back=back)
         except SimulationError as exc:
@@ -294,17 +324,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             objects = (o.shapes, o.sizes, o.positions, o.rotations)
         if result.handed_back is not None:
             (i,) = members
-            f_back, q, v = result.handed_back
-            work_back = float(motions[i].work[f_back])
-            tier, later = linear_from(i, f_back, q, v, work_back)
-            returned.append(tier.stats)
-            returned_steps += trees[i].rig.model.n_segments * tier.stats.steps
-            came_back.append((f_back / scene.fps, trees[i].name))
-            take(i, tier.motions()[0], f_back, work_back)
-            for p_tier, p_members, p_work in later:
-                pym.append((p_tier, p_members))
-                p_start = p_tier.first_frame + (1 if p_tier.substep_start % p_tier.spf else 0)
-                take(i, p_tier.motions()[0], p_start, p_work)
+            back_to_linear(i, *result.handed_back)
     for e in handed:
         i = next(k for k, t in enumerate(trees) if t.name == e.tree)
         motions[i].events.insert(0, e)
@@ -442,7 +462,7 @@ class PlanarLOD:
         stats["returned"] = len(back)
         if back:
             notes.append(f"{len(back)} tree{'s' if len(back) > 1 else ''} came back to the "
-                         f"linear tier from the reference, back in its range (first: "
+                         f"linear tier, back in its range (first: "
                          f"{back[0][1]} at t = {back[0][0]:.3f} s)")
         if refs:
             meta["reference_runs"] = len(refs)

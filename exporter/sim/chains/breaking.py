@@ -43,6 +43,15 @@ class ChainEvents:
                 self.break_joint(int(b), t, pose, f"{total[b]:.0f} N m > strength "
                                                   f"{self.strength[b]:.0f} N m")
 
+    def joint_moments(self) -> np.ndarray:
+        """Each bone's joint's bending moment (B,) N m from its springs in
+        every plane (a cone limit's share aside: see check_breaks)."""
+        s = self.state
+        j = self.prev_body
+        rel = s[:, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
+        moment = self.k[self.body_bone] * (rel + self.rest)
+        return np.sqrt(np.bincount(self.body_bone, moment * moment, minlength=self.n))
+
     def _remove_joint(self, body: int, which: tuple[int, ...] = (PIVOT, SPRING, LIMIT)) -> None:
         if PIVOT in which:
             self.pivot_alive[body] = False

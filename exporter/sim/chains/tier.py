@@ -50,13 +50,24 @@ import numpy as np
 import pymunk
 from pymunk import batch
 
+from ...errors import SimulationError
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
-from ..common import SimTree, TreeMotion, locate, sub_frame_samples
-from ...errors import SimulationError
 from ..audit import Ledger, LoadWork, bone_energy, per_tree
+from ..common import SimTree, TreeMotion, locate, sub_frame_samples
 from ..debris import Debris
-from ..events import Event
+from ..events import TIER, Event
+from ..linear import (
+    BREAK_MARGIN,
+    CONE_FRACTION,
+    CONTACT_MARGIN,
+    MAX_TURN,
+    RETURN_DETAIL,
+    RETURN_FRACTION,
+    RETURN_TURN,
+    RETURN_WINDOW,
+    hinges_from_pose,
+)
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
 from ..quality import Quality
@@ -118,6 +129,12 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.update_every = min(divisors, key=lambda d: (abs(d - want), d))
         self.dt_update = self.h * self.update_every
         self.trees = [t for t in trees if t.active]
+        # the linear tier's step (s) when its trees may go back to it once
+        # back in the linear range (lod.py), and the frame, hinge angles and
+        # rates (2B,) where they did: from then on the tier records nothing
+        self.hand_back: float | None = None
+        self.handed_back: tuple | None = None
+        self.returning = 0.0  # s the trees have been back in range
         self._collect()
         self._chains()
         self._lumping()
@@ -184,7 +201,11 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self._audit(first, self.pose)
 
     def advance_frame(self, f: int) -> None:
-        """Step to frame f and record it."""
+        """Step to frame f and record it (nothing once its trees went back
+        to the linear tier)."""
+        if self.handed_back is not None:
+            self.stats.frame_seconds.append(0.0)  # frame timings stay aligned to the end
+            return
         writes = batch.BodyFields.FORCE | batch.BodyFields.TORQUE
         t_frame = time.perf_counter()
         t = self.substep * self.h
@@ -250,9 +271,41 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         if self.projectiles is not None:
             self.projectiles.record(f)
         self.settle(t, pose_frame, 1.0 / self.scene.fps)
+        if self.hand_back is not None and self._back_in_range(t, pose_frame):
+            self.handed_back = (f, *hinges_from_pose(self.bones, pose_frame["rot"],
+                                                     pose_frame["omega"]))
+            self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL) for tr in self.trees)
         self.stats.update_seconds += time.perf_counter() - t0
         self.stats.frame_seconds.append(time.perf_counter() - t_frame)
         self.stats.debris_clamped = self.debris.clamped
+
+    def _back_in_range(self, t: float, pose: dict) -> bool:
+        """Whether the trees have been back in the linear tier's range, with
+        margin, for RETURN_WINDOW s up to this frame (at t s): the rule of
+        the reference's `_back_in_range` (linear.py's RETURN_* constants),
+        on this tier's pose: every joint holding, none cut, no projectile,
+        nothing on the ground, every blast past; bones, hinges, moments
+        and tips within RETURN_FRACTION of the linear tier's limits; no hinge
+        turning more than RETURN_TURN per linear step."""
+        if (not self.joint_alive.all() or self.in_debris.any() or self.cut_state
+                or self.projectiles is not None or self.contact_active
+                or not self.loads.blasts_passed(t, pose["com"])):
+            self.returning = 0.0
+            return False
+        rot = pose["rot"]
+        cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+        q, v = hinges_from_pose(self.bones, rot, pose["omega"])
+        frac = self.joint_moments() / np.maximum(self.strength, 1e-12)
+        tip_z = pose["pivot"][:, 2] + np.einsum("bj,bj->b", rot[:, 2], self.tip0 - self.pivot0)
+        ok = (np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
+              and np.all(np.abs(q).reshape(-1, 2)
+                         < RETURN_FRACTION * CONE_FRACTION * self.cone[:, None])
+              and np.all(frac < RETURN_FRACTION * BREAK_MARGIN)
+              and np.all((tip_z > self.radius + 2 * CONTACT_MARGIN)
+                         | (tip_z >= self.tip0[:, 2] - 1e-3))
+              and np.all(np.abs(v) * self.hand_back < RETURN_TURN))
+        self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
+        return self.returning >= RETURN_WINDOW - 1e-9
 
     def _audit(self, frame: int, pose: dict) -> None:
         """Record each tree's energy (audit.py): its bones' (debris included)
