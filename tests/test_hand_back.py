@@ -6,15 +6,13 @@ reference, it then follows what the reference alone would have done."""
 
 import numpy as np
 import pytest
-
-import treebake.sim.chains.tier as pymunk_tier
-import treebake.sim.reference as reference
 from treebake.library import grammars_folder
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
+from treebake.sim import linear
 from treebake.sway import segment_ends
 
-ENGINES = {"reference": (reference, 4.0), "pymunk": (pymunk_tier, 5.5)}  # module, duration s
+DURATION = {"reference": 4.0, "pymunk": 5.5}  # s: the pymunk tier gives the spruce back later
 
 
 def blast_scene(engine: str, duration: float):
@@ -30,19 +28,18 @@ def blast_scene(engine: str, duration: float):
         file="<hand-back>")
 
 
-@pytest.fixture(scope="module", params=list(ENGINES))
+@pytest.fixture(scope="module", params=list(DURATION))
 def bakes(request):
     if request.param == "reference":
         pytest.importorskip("mujoco")
-    module, duration = ENGINES[request.param]
-    scene = blast_scene(request.param, duration)
+    scene = blast_scene(request.param, DURATION[request.param])
     back = bake_scene(scene)
-    keep = module.RETURN_FRACTION
-    module.RETURN_FRACTION = 0.0  # never back in range: the engine to the end
+    keep = linear.RETURN_FRACTION
+    linear.RETURN_FRACTION = 0.0  # never back in range: the engine to the end
     try:
         stay = bake_scene(scene)
     finally:
-        module.RETURN_FRACTION = keep
+        linear.RETURN_FRACTION = keep
     return request.param, back, stay
 
 

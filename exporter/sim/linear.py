@@ -59,12 +59,12 @@ ERROR_TOLERANCE = 5e-4
 MAX_PARTS = 8
 REARM = 0.25  # (a split step's local error falls as its square)
 STEP_TURN = 0.3  # rad: the most a tree's first mode turns in one step
-# A tree the reference took for large motion or a moment near breaking comes
-# back (lod.py) once it has stayed for RETURN_WINDOW within RETURN_FRACTION
-# of every limit above (hysteresis: it does not bounce between engines),
-# intact, with no hinge turning more than RETURN_TURN per step of this tier
-# (a blast's twig ringing at tens of Hz, which this step would not resolve,
-# has died down first).
+# A tree a nonlinear engine took for large motion or a moment near breaking
+# comes back (lod.py) once it has stayed for RETURN_WINDOW within
+# RETURN_FRACTION of every limit above (hysteresis: it does not bounce
+# between engines), intact, with no hinge turning more than RETURN_TURN per
+# step of this tier (a blast's twig ringing at tens of Hz, which this step
+# would not resolve, has died down first): `in_return_range`.
 RETURN_FRACTION = 0.5
 RETURN_WINDOW = 0.5  # s
 RETURN_TURN = 0.02  # rad per step
@@ -112,8 +112,8 @@ class LinearTier:
     pymunk tier's substeps per frame (a tree handed over at a step starts
     there at the substep at or before it). With `state` (hinge angles and
     rates (2B,), rad and rad/s from the grown shape), the trees start from
-    it at frame `start_frame` (coming back from the reference), else at rest
-    at frame 0."""
+    it at frame `start_frame` (coming back from a nonlinear engine), else at
+    rest at frame 0."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  pymunk_substeps: int, log=None, start_frame: int = 0,
@@ -450,3 +450,23 @@ def hinges_from_pose(bones: Bones, rot: np.ndarray, omega: np.ndarray):
     q = np.stack([q0, q1], 1).reshape(2 * nb)
     v = np.stack([(w * n0).sum(1), (w * n1_turned).sum(1)], 1).reshape(2 * nb)
     return q, v
+
+
+def in_return_range(bones: Bones, rot: np.ndarray, pivot: np.ndarray, q: np.ndarray,
+                    v: np.ndarray, moment: np.ndarray, h: float) -> bool:
+    """Whether intact bones, turned by `rot` (B, 3, 3) from rest with
+    pivots `pivot` (B, 3) m, hinge angles and rates q, v (2B,) rad, rad/s
+    and joint moments `moment` (B,) N m, are back in this tier's range with
+    RETURN_FRACTION's margin: bones turned less than MAX_TURN, hinges within
+    CONE_FRACTION of their cones, moments below BREAK_MARGIN of their
+    strengths, tips clear of the ground (or no lower than they grew), no
+    hinge turning more than RETURN_TURN in a step of `h` s."""
+    cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+    tip_z = pivot[:, 2] + np.einsum("bj,bj->b", rot[:, 2], bones.tip0 - bones.pivot0)
+    return bool(np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
+                and np.all(np.abs(q).reshape(-1, 2)
+                           < RETURN_FRACTION * CONE_FRACTION * bones.cone[:, None])
+                and np.all(moment < RETURN_FRACTION * BREAK_MARGIN * bones.strength)
+                and np.all((tip_z > bones.radius + 2 * CONTACT_MARGIN)
+                           | (tip_z >= bones.tip0[:, 2] - 1e-3))
+                and np.all(np.abs(v) * h < RETURN_TURN))

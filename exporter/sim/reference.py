@@ -146,16 +146,7 @@ from .common import (
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .events import AT_REST, BROKE, CUT, HINGE, TIER, UPROOTED, Event
-from .linear import (
-    BREAK_MARGIN,
-    CONE_FRACTION,
-    CONTACT_MARGIN,
-    MAX_TURN,
-    RETURN_DETAIL,
-    RETURN_FRACTION,
-    RETURN_TURN,
-    RETURN_WINDOW,
-)
+from .linear import RETURN_DETAIL, RETURN_WINDOW, in_return_range
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .quality import Quality
@@ -1031,33 +1022,21 @@ class ReferenceSolver:
     def _back_in_range(self, t: float, h_linear: float) -> bool:
         """Whether the trees have been back in the linear tier's range, with
         margin, for RETURN_WINDOW s up to this frame (at t s): every joint
-        holding and none cut, no projectile, every blast's pulse past; every
-        bone turned less than RETURN_FRACTION of linear.MAX_TURN from rest,
-        every hinge within RETURN_FRACTION of its cone fraction, every
-        moment within RETURN_FRACTION of BREAK_MARGIN of its strength, every
-        tip clear of the ground; and no hinge turning more than RETURN_TURN
-        per linear step of `h_linear` s (motion its step resolves: a blast's
-        twig ringing stays here until it has died down)."""
+        holding and none cut, no projectile, every blast's pulse past; and
+        its pose within linear.in_return_range for a linear step of
+        `h_linear` s (motion that step resolves: a blast's twig ringing
+        stays here until it has died down)."""
         if (not self.attached.all() or any(self.cut_state)
                 or any(g.projectiles for g in self.groups)
                 or not self.loads.blasts_passed(t, self.com[:self.n])):
             self.returning = 0.0
             return False
         n = self.n
-        rot = self.rot[:n]
-        cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-        q, v = self._hinges()
-        moment = np.concatenate([self._moments(g) for g in self.groups])
-        order = np.concatenate([g.bones for g in self.groups])
-        frac = np.zeros(n)
-        frac[order] = moment / np.maximum(self.strength[order], 1e-12)
-        tip_z = self._pivots()[:, 2] + np.einsum("bj,bj->b", rot[:, 2], self.tip0 - self.pivot0)
-        ok = (np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
-              and np.all(np.abs(q).reshape(-1, 2) < RETURN_FRACTION * CONE_FRACTION * self.cone)
-              and np.all(frac < RETURN_FRACTION * BREAK_MARGIN)
-              and np.all((tip_z > self.radius + 2 * CONTACT_MARGIN)
-                         | (tip_z >= self.tip0[:, 2] - 1e-3))
-              and np.all(np.abs(v) * h_linear < RETURN_TURN))
+        moment = np.zeros(n)
+        for g in self.groups:
+            moment[g.bones] = self._moments(g)
+        ok = in_return_range(self.bones, self.rot[:n], self._pivots(), *self._hinges(), moment,
+                             h_linear)
         self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
         return self.returning >= RETURN_WINDOW - 1e-9
 

@@ -57,17 +57,7 @@ from ..audit import Ledger, LoadWork, bone_energy, per_tree
 from ..common import SimTree, TreeMotion, locate, sub_frame_samples
 from ..debris import Debris
 from ..events import TIER, Event
-from ..linear import (
-    BREAK_MARGIN,
-    CONE_FRACTION,
-    CONTACT_MARGIN,
-    MAX_TURN,
-    RETURN_DETAIL,
-    RETURN_FRACTION,
-    RETURN_TURN,
-    RETURN_WINDOW,
-    hinges_from_pose,
-)
+from ..linear import RETURN_DETAIL, RETURN_WINDOW, hinges_from_pose, in_return_range
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
 from ..quality import Quality
@@ -286,24 +276,15 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         on this tier's pose: every joint holding, none cut, no projectile,
         nothing on the ground, every blast past; bones, hinges, moments
         and tips within RETURN_FRACTION of the linear tier's limits; no hinge
-        turning more than RETURN_TURN per linear step."""
+        turning more than RETURN_TURN per linear step (in_return_range)."""
         if (not self.joint_alive.all() or self.in_debris.any() or self.cut_state
                 or self.projectiles is not None or self.contact_active
                 or not self.loads.blasts_passed(t, pose["com"])):
             self.returning = 0.0
             return False
-        rot = pose["rot"]
-        cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-        q, v = hinges_from_pose(self.bones, rot, pose["omega"])
-        frac = self.joint_moments() / np.maximum(self.strength, 1e-12)
-        tip_z = pose["pivot"][:, 2] + np.einsum("bj,bj->b", rot[:, 2], self.tip0 - self.pivot0)
-        ok = (np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
-              and np.all(np.abs(q).reshape(-1, 2)
-                         < RETURN_FRACTION * CONE_FRACTION * self.cone[:, None])
-              and np.all(frac < RETURN_FRACTION * BREAK_MARGIN)
-              and np.all((tip_z > self.radius + 2 * CONTACT_MARGIN)
-                         | (tip_z >= self.tip0[:, 2] - 1e-3))
-              and np.all(np.abs(v) * self.hand_back < RETURN_TURN))
+        q, v = hinges_from_pose(self.bones, pose["rot"], pose["omega"])
+        ok = in_return_range(self.bones, pose["rot"], pose["pivot"], q, v, self.joint_moments(),
+                             self.hand_back)
         self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
         return self.returning >= RETURN_WINDOW - 1e-9
 
