@@ -150,22 +150,29 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         return tier, members
 
     handed: list = []
+
+    def leaves(i: int, ho: HandOff) -> str:
+        """Tree i left a linear tier (`ho`): its engine, recorded and logged."""
+        to = engine_for(ho.kind)
+        u = uses[i]
+        uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason) \
+            if u.switch is None else \
+            TierUse(f"{u.tier}, then {to}", u.switch,
+                    f"{u.reason}; to {to} at {ho.time:.3f} s: {ho.reason}")
+        handed.append(Event(ho.time, trees[i].name, TIER, "", f"to {to}: {ho.reason}"))
+        log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier ({ho.reason})")
+        return to
+
     for f in range(1, frames):
         if lin is not None:
             to_pymunk: dict[int, list] = {}  # substep -> hand-offs: one pymunk tier each
             for ho in lin.advance_frame(f):
                 i = lin_idx[ho.tree]
-                to = engine_for(ho.kind)
-                if to == "pymunk":
+                if leaves(i, ho) == "pymunk":
                     to_pymunk.setdefault(ho.substep, []).append((i, ho))
                 else:  # the reference's hinges are the linear tier's coordinates
                     ref_runs.append(([i], ho.time, (ho.q, ho.v), ho,
                                      float(lin.ledger.running[ho.tree])))
-                uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason)
-                handed.append(Event(ho.time, trees[i].name, TIER, "",
-                                    f"to {to}: {ho.reason}"))
-                log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
-                    f"({ho.reason})")
             for group in to_pymunk.values():
                 pym.append(pymunk_from(group))
         for tier, _ in pym:
@@ -191,21 +198,17 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         mine.energy[start:] = m.energy[start:]
         mine.work[start:] = m.work[start:] + work_before
         # sub-frame samples: the earlier engine's before `start`, m's after
-        t_start = start / scene.fps
-        keep = mine.extra_times < t_start
-        if m.extra_quaternions is None or not len(m.extra_times):
-            mine.extra_times = mine.extra_times[keep]
-            if mine.extra_quaternions is not None:
-                mine.extra_quaternions = mine.extra_quaternions[keep]
-                mine.extra_pivots = mine.extra_pivots[keep]
-        elif mine.extra_quaternions is None or not keep.any():
-            mine.extra_times, mine.extra_quaternions = m.extra_times, m.extra_quaternions
-            mine.extra_pivots = m.extra_pivots
-        else:
-            mine.extra_times = np.concatenate([mine.extra_times[keep], m.extra_times])
-            mine.extra_quaternions = np.concatenate([mine.extra_quaternions[keep],
-                                                     m.extra_quaternions])
-            mine.extra_pivots = np.concatenate([mine.extra_pivots[keep], m.extra_pivots])
+        nb = mine.quaternions.shape[1]
+        keep = mine.extra_times < start / scene.fps
+
+        def samples(mo: TreeMotion, rows) -> list[np.ndarray]:
+            if mo.extra_quaternions is None:  # none kept
+                return [np.zeros(0), np.zeros((0, nb, 4)), np.zeros((0, nb, 3))]
+            return [mo.extra_times[rows], mo.extra_quaternions[rows], mo.extra_pivots[rows]]
+
+        mine.extra_times, mine.extra_quaternions, mine.extra_pivots = (
+            np.concatenate(pair) for pair in zip(samples(mine, keep),
+                                                 samples(m, slice(None))))
 
     returns: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (tree, frame, q, v)
 
@@ -226,7 +229,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
 
     def linear_from(i: int, f_back: int, q: np.ndarray, v: np.ndarray, work_before: float):
         """Tree i in a linear tier of its own from frame f_back, with the
-        reference's hinge angles and rates there (its coordinates: no jump),
+        nonlinear engine's hinge angles and rates there (no jump),
         to the end or until it leaves again: then to the reference (a run
         queued) or a pymunk tier (run here), `work_before` J plus the tier's
         own carried over. The tier and those pymunk tiers."""
@@ -239,35 +242,26 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         later = []
         for f in range(f_back + 1, frames):
             for ho in tier.advance_frame(f):
-                to = engine_for(ho.kind)
                 work = work_before + float(tier.ledger.running[0])
-                if to == "pymunk":
+                if leaves(i, ho) == "pymunk":
                     p_tier, _ = pymunk_from([(i, ho)])
                     for ff in range(math.ceil(ho.substep / p_tier.spf - 1e-9), frames):
                         p_tier.advance_frame(ff)
                     later.append((p_tier, [i], work))
                 else:
                     ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, work))
-                uses[i] = TierUse(f"{uses[i].tier}, then {to}", uses[i].switch,
-                                  f"{uses[i].reason}; to {to} at {ho.time:.3f} s: {ho.reason}")
-                handed.append(Event(ho.time, trees[i].name, TIER, "", f"to {to}: {ho.reason}"))
-                log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier "
-                    f"({ho.reason})")
         return tier, later
 
     objects = None
     ref_stats = []
-    returned: list[LinearStats] = []  # the linear tiers of trees the reference gave back
-    returned_steps = 0  # their segments x steps
-    came_back: list[tuple[float, str]] = []  # (time s, tree) of each return
+    # each return: (time s, tree, the stats of the linear tier it came back to)
+    returned: list[tuple[float, int, LinearStats]] = []
+
     def back_to_linear(i: int, f_back: int, q: np.ndarray, v: np.ndarray) -> None:
         """Tree i back in a linear tier from frame f_back (linear_from)."""
-        nonlocal returned_steps
         work_back = float(motions[i].work[f_back])
         tier, later = linear_from(i, f_back, q, v, work_back)
-        returned.append(tier.stats)
-        returned_steps += trees[i].rig.model.n_segments * tier.stats.steps
-        came_back.append((f_back / scene.fps, trees[i].name))
+        returned.append((f_back / scene.fps, i, tier.stats))
         take(i, tier.motions()[0], f_back, work_back)
         for p_tier, p_members, p_work in later:
             pym.append((p_tier, p_members))
@@ -303,9 +297,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             for f in range(1 if ho is None else math.ceil(ho.substep / tier.spf - 1e-9), frames):
                 tier.advance_frame(f)
             pym.append((tier, members))
-            start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
-            for i, m in zip(members, tier.motions()):
-                take(i, m, start, work_before)
+            take_pymunk(tier, members, [work_before] * len(members))
+            for i in members:
                 uses[i] = TierUse("pymunk (the reference failed)") if ho is None else \
                     TierUse(uses[i].tier.rsplit(", then reference", 1)[0] + ", then pymunk",
                             uses[i].switch, uses[i].reason + "; the reference failed")
@@ -340,13 +333,14 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 for tier, members in pym)
     if lin is not None:
         steps += sum(trees[i].rig.model.n_segments for i in lin_idx) * lin.stats.steps
-    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats) + returned_steps
-    linear = ([lin.stats] if lin is not None else []) + returned
+    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats)
+    steps += sum(trees[i].rig.model.n_segments * st.steps for _, i, st in returned)
+    linear = ([lin.stats] if lin is not None else []) + [st for _, _, st in returned]
     return ChunkResult(motions, stats, linear, uses, h,
                        pym_h.dt_update if pym_h is not None else h,
                        lin.h if lin is not None else None,
                        sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats,
-                       came_back)
+                       [(t, trees[i].name) for t, i, _ in returned])
 
 
 def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, extent: np.ndarray,
