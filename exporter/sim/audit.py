@@ -57,9 +57,11 @@ class Ledger:
     def add_work(self, per_tree_work: np.ndarray) -> None:
         self.running += per_tree_work
 
-    def record(self, frame: int, energy: np.ndarray) -> None:
+    def record(self, frame: int, energy: np.ndarray, pending: np.ndarray | None = None) -> None:
+        """The frame's energy per tree, and the work so far plus `pending`
+        (J per tree: what the loads held now did since their update)."""
         self.energy[frame] = energy
-        self.work[frame] = self.running
+        self.work[frame] = self.running if pending is None else self.running + pending
 
 
 class LoadWork:
@@ -72,6 +74,15 @@ class LoadWork:
         self.trapezoid = trapezoid
         self.force = None
         self.point = None
+
+    def pending(self, point: np.ndarray) -> np.ndarray:
+        """Per-bone work (J) the held force has done since its update, its
+        points now at `point`: a frame between updates records it (else an
+        impulsive push, 50-100 J per 2 ms hold on a blasted sapling, shows
+        as a gain until the next update). Trapezoidal steps hold nothing."""
+        if self.trapezoid or self.force is None or len(self.force) != len(point):
+            return np.zeros(len(point))
+        return (self.force * (point - self.point)).sum(1)
 
     def update(self, force: np.ndarray, point: np.ndarray) -> np.ndarray:
         """Per-bone work (J) since the previous update, and hold the new force."""

@@ -10,11 +10,9 @@ import numpy as np
 
 from ..rig import Rig
 from ..rotations import cross
-from .loads import BoneProps
+from .loads import MAX_ACCELERATION, BoneProps
 
 MAX_ANGULAR_SPEED = 500.0  # rad/s: beyond this a bone is taken to be unstable
-MAX_ACCELERATION = 2000.0  # m/s^2: external loads on a bone are capped here (reported)
-CAP_WINDOW = 0.002  # s: the cap holds for loads held this long; longer holds get a lower one
 
 
 def locate(trees: list[SimTree], offsets: np.ndarray, bone_tree: np.ndarray,
@@ -27,30 +25,37 @@ def locate(trees: list[SimTree], offsets: np.ndarray, bone_tree: np.ndarray,
 
 
 def cap_loads(force: np.ndarray, mass: np.ndarray, t: float, stats,
-              locate_row: Callable[[int], tuple[str, int]], dt: float) -> np.ndarray:
-    """Scale each bone's external load (N, rows of `force`, in place), held
-    for `dt` s, down to MAX_ACCELERATION x its mass (kg), or to the same
-    impulse, MAX_ACCELERATION x CAP_WINDOW, when held longer. Counted on
-    `stats.limited`; the first cap is kept in `stats.first_limit` as (tree,
-    segment, time s, m/s^2).
+              locate_row: Callable[[int], tuple[str, int]],
+              blast_capped: np.ndarray | None = None) -> np.ndarray:
+    """Scale each bone's external load (N, rows of `force`, in place) down
+    to MAX_ACCELERATION x its mass (kg). Counted on `stats.limited`, with
+    the bones whose blast push SceneLoads.forces held back (`blast_capped`,
+    m/s^2 asked, 0 where none); the first cap is kept in `stats.first_limit`
+    as (tree, segment, time s, m/s^2).
 
     Loads that would accelerate a bone faster (a blast at a few metres:
     thousands of g on a twig) break real wood, and in Chipmunk they pull
     joints apart faster than its iterations hold them; capping the input
     keeps the constraints consistent, and every cap is reported. A blast's
-    pulse lasts about CAP_WINDOW: capped by acceleration alone, a solver
-    holding its loads 8 ms would pass four times the impulse of one holding
-    them 2 ms; capped by impulse per hold, both pass the same."""
-    cap = MAX_ACCELERATION * min(1.0, CAP_WINDOW / max(dt, 1e-12))
+    push is capped at the same rate before it gets here, and what that holds
+    back follows (SceneLoads.forces): every solver passes the pulse's whole
+    impulse, whatever it holds its loads for."""
     acc = np.linalg.norm(force, axis=1) / np.maximum(mass, 1e-9)
-    idx = np.nonzero(acc > cap)[0]
+    over = acc > MAX_ACCELERATION
+    asked = acc
+    if blast_capped is not None and len(blast_capped):
+        asked = np.maximum(acc, blast_capped)
+        idx = np.nonzero(over | (blast_capped > 0))[0]
+    else:
+        idx = np.nonzero(over)[0]
     if not len(idx):
         return force
     if not stats.limited:
         tree, seg = locate_row(int(idx[0]))
-        stats.first_limit = (tree, seg, round(t, 4), round(float(acc[idx[0]]), 1))
+        stats.first_limit = (tree, seg, round(t, 4), round(float(asked[idx[0]]), 1))
     stats.limited += len(idx)
-    force[idx] *= (cap / acc[idx])[:, None]
+    held = np.nonzero(over)[0]
+    force[held] *= (MAX_ACCELERATION / acc[held])[:, None]
     return force
 
 
@@ -59,10 +64,10 @@ def cap_note(stats) -> str | None:
     if not stats.limited:
         return None
     tree, seg, t, acc = stats.first_limit
-    return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 (the same impulse per "
-            f"{CAP_WINDOW * 1e3:.0f} ms when held longer) on {stats.limited} bone updates "
+    return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone updates "
             f"(first: tree {tree!r}, segment {seg}, t = {t:.3f} s, {acc:.0f} m/s^2): the "
-            "motion there is milder than the load asks")
+            "motion there is milder than the load asks (a blast's impulse is kept: what the "
+            "cap holds back follows at the same rate)")
 
 
 def hinge_axes(axis: np.ndarray, toward: np.ndarray | None = None) -> np.ndarray:

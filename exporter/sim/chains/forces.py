@@ -12,7 +12,6 @@ from ...rotations import apply, apply_transposed, cross
 from ..audit import per_tree
 from ..common import cap_loads
 from ..contact import effective_mass, ground_forces
-from ..debris import MAX_STEP
 from ..loads import BoneProps
 
 REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (8 let a
@@ -37,7 +36,7 @@ class ChainForces:
         if pulls is not None:
             force += pulls
         limited = self.stats.limited
-        force = cap_loads(force, self.mass, t, self.stats, self.locate, dt)
+        force = cap_loads(force, self.mass, t, self.stats, self.locate, self.loads.blast_capped)
         external = force - self.mass[:, None] * self.loads.g
         external[self.in_debris] = 0.0  # debris counts its own (Debris.work)
         self.ledger.add_work(per_tree(self.load_work.update(external, com), self.bone_tree,
@@ -55,7 +54,8 @@ class ChainForces:
         self.refine = int(min(MAX_REFINE, max(REFINE if impulsive else 1,
                                               math.ceil(spin * self.h / REFINE_SPIN))))
         if self.debris.count:
-            self.debris.step(dt, lambda c, v, ax: self._debris_loads(t, c, v, ax, dt))
+            self.debris.step(dt, lambda c, v, ax, start, h: self._debris_loads(t + start, c, v,
+                                                                                ax, h))
             force[self.debris.bones] = 0.0
         # Lumped: a body also carries the loads of the chains attached to it,
         # as if they were rigid: each acts where its COM would be if rigid.
@@ -142,14 +142,15 @@ class ChainForces:
         return out
 
     def _debris_loads(self, t: float, com: np.ndarray, vcom: np.ndarray, axis: np.ndarray,
-                      dt: float) -> np.ndarray:
-        """Loads on the debris bones (gravity, air, blasts), capped."""
+                      hold: float) -> np.ndarray:
+        """Loads on the debris bones (gravity, air, blasts), held `hold` s
+        from t, capped."""
         d = self.debris.bones
         props = BoneProps(*(getattr(self.props, f)[d] for f in
                             ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
-        force = self.loads.forces(t, com, vcom, axis, props)
+        force = self.loads.forces(t, com, vcom, axis, props, dt=hold)
         return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])),
-                         min(dt, MAX_STEP))
+                         self.loads.blast_capped)
 
     def _add_contact(self, contact, pose: dict, ftot: np.ndarray, torque: np.ndarray) -> None:
         """Add ground contact forces to the touching bones and, through
