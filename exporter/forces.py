@@ -241,26 +241,28 @@ class Explosion:
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=float)
 
-    def loads(self, points: np.ndarray, t: float):
-        """Overpressure p (Pa), dynamic pressure q (Pa) and unit radial
-        direction at `points` at time t."""
+    def front(self, points: np.ndarray):
+        """At `points` (N, 3) m: the unit radial direction, the peak
+        overpressure and dynamic pressure (Pa), the positive phase's
+        duration and the front's arrival (s)."""
         r_vec = points - self.position
         r = np.maximum(np.linalg.norm(r_vec, axis=1), 1e-3)
-        direction = r_vec / r[:, None]
-        w13 = self.charge ** (1.0 / 3.0)
-        z = r / w13
+        z = r / self.charge ** (1.0 / 3.0)
         ps = kinney_graham_overpressure(z) * ATMOSPHERE
-        td = kinney_graham_duration(z, self.charge)
         mach = np.sqrt(1 + 6.0 / 7.0 * ps / ATMOSPHERE)  # Rankine-Hugoniot shock Mach
-        arrival = self.time + r / (SOUND_SPEED * mach)
+        qs = 2.5 * ps**2 / (7 * ATMOSPHERE + ps)
+        return (r_vec / r[:, None], ps, qs, kinney_graham_duration(z, self.charge),
+                self.time + r / (SOUND_SPEED * mach))
+
+    def loads(self, points: np.ndarray, t: float):
+        """Overpressure p (Pa), dynamic pressure q (Pa) and unit radial
+        direction at `points` at time t, and the front's arrival (s)."""
+        direction, ps, qs, td, arrival = self.front(points)
         tau = t - arrival
         active = (tau >= 0) & (tau <= td)
         x = np.where(active, tau / td, 1.0)
         wave = np.where(active, (1 - x) * np.exp(-self.decay * x), 0.0)
-        p = ps * wave
-        qs = 2.5 * ps**2 / (7 * ATMOSPHERE + ps)
-        q = qs * wave**2
-        return p, q, direction, arrival
+        return ps * wave, qs * wave**2, direction, arrival
 
     def force(self, points: np.ndarray, t: float, axis: np.ndarray, wood_area: np.ndarray,
               leaf_area: np.ndarray, diameter: np.ndarray, cd: float) -> np.ndarray:
@@ -279,17 +281,9 @@ class Explosion:
         its front's arrival to time t, for members held in their present
         orientation (exact: the Friedlander pulse and the diffraction's
         clearing integrate in closed form), and the arrival times (N,) s."""
-        r_vec = points - self.position
-        r = np.maximum(np.linalg.norm(r_vec, axis=1), 1e-3)
-        direction = r_vec / r[:, None]
-        z = r / self.charge ** (1.0 / 3.0)
-        ps = kinney_graham_overpressure(z) * ATMOSPHERE
-        td = kinney_graham_duration(z, self.charge)
-        mach = np.sqrt(1 + 6.0 / 7.0 * ps / ATMOSPHERE)
-        arrival = self.time + r / (SOUND_SPEED * mach)
+        direction, ps, qs, td, arrival = self.front(points)
         x = np.clip((t - arrival) / td, 0.0, 1.0)
         clear = np.maximum(3 * diameter / SOUND_SPEED, 1e-5)
-        qs = 2.5 * ps**2 / (7 * ATMOSPHERE + ps)
         # int_0^x (1-u) e^(-b u) du, and int_0^x (1-u)^2 e^(-2 b u) du
         beta = self.decay + td / clear
         drag = qs * td * (_moment(0, 2 * self.decay, x) - 2 * _moment(1, 2 * self.decay, x)
@@ -301,12 +295,8 @@ class Explosion:
     def window(self, points: np.ndarray) -> tuple[float, float]:
         """Times (s) the front reaches the first of `points` (N, 3) m and the
         positive phase has passed the last."""
-        r = np.maximum(np.linalg.norm(points - self.position, axis=1), 1e-3)
-        z = r / self.charge ** (1.0 / 3.0)
-        mach = np.sqrt(1 + 6.0 / 7.0 * kinney_graham_overpressure(z))
-        arrival = self.time + r / (SOUND_SPEED * mach)
-        return float(arrival.min(initial=np.inf)), \
-            float((arrival + kinney_graham_duration(z, self.charge)).max(initial=self.time))
+        _, _, _, td, arrival = self.front(points)
+        return float(arrival.min(initial=np.inf)), float((arrival + td).max(initial=self.time))
 
     def passed(self, points: np.ndarray) -> float:
         """Time (s) by which the positive phase has passed every point (N, 3) m."""

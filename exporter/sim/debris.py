@@ -148,8 +148,10 @@ class Debris:
             # at the mean of its velocities before and after (exact for the
             # step's constant force; the velocity before alone missed
             # m a^2 h^2 / 2 per substep: 2 J per ms on a blasted sapling's
-            # ten broken twigs, pushed at 2000 m/s^2)
+            # ten broken twigs, pushed at 2000 m/s^2); the COM's arm from its
+            # body's is the step's start's
             external = bone_force - gravity
+            arm = com - self.x[self.owner]
             self.work[self.bones] += 0.5 * (external * vcom).sum(1) * h
             f, tq = self.loads(bone_force, com)
             touching = np.zeros(self.count, dtype=bool)
@@ -175,7 +177,8 @@ class Debris:
             self.x[awake] += (self.v * h)[awake]
             turn = matrices_from_rotvec(self.w * h)
             self.r[awake] = compose(turn, self.r)[awake]
-            self.work[self.bones] += 0.5 * (external * self.bone_poses()[2]).sum(1) * h
+            v_end = self.v[self.owner] + cross(self.w[self.owner], arm)
+            self.work[self.bones] += 0.5 * (external * v_end).sum(1) * h
             slow = touching & (np.linalg.norm(self.v, axis=1) < SLEEP_SPEED) & \
                 (np.linalg.norm(self.w, axis=1) < SLEEP_SPEED)
             self.rest_time = np.where(slow, self.rest_time + h, 0.0)
