@@ -280,7 +280,8 @@ class Explosion:
         """The impulse (N s, (N, 3)) `force` has delivered at each point from
         its front's arrival to time t, for members held in their present
         orientation (exact: the Friedlander pulse and the diffraction's
-        clearing integrate in closed form), and the arrival times (N,) s."""
+        clearing integrate in closed form), the front's arrival and the
+        positive phase's duration (N,) s."""
         direction, ps, qs, td, arrival = self.front(points)
         x = np.clip((t - arrival) / td, 0.0, 1.0)
         clear = np.maximum(3 * diameter / SOUND_SPEED, 1e-5)
@@ -290,7 +291,7 @@ class Explosion:
                           + _moment(2, 2 * self.decay, x))
         pulse = ps * td * (_moment(0, beta, x) - _moment(1, beta, x))
         area = frontal_area(axis, direction, wood_area, leaf_area)
-        return ((cd * drag + pulse) * area)[:, None] * direction, arrival
+        return ((cd * drag + pulse) * area)[:, None] * direction, arrival, td
 
     def window(self, points: np.ndarray) -> tuple[float, float]:
         """Times (s) the front reaches the first of `points` (N, 3) m and the

@@ -103,7 +103,7 @@ class LinearStats:
     rebuilds: int = 0
     limited: int = 0
     first_limit: tuple | None = None
-    split: int = 0  # steps split while a blast acted
+    split: int = 0  # steps split while a blast pushed
     parts: int = 1  # parts every step is split into, for accuracy (ERROR_TOLERANCE)
     refined: list = field(default_factory=list)  # (time s, tree, segment, estimate) per split
     build_seconds: float = 0.0

@@ -91,8 +91,8 @@ class SceneLoads:
         phase lasts milliseconds, and a sample held over the interval would
         miss it or overstate its impulse: the pulse is integrated exactly and
         its rate capped (MAX_ACCELERATION, the rest delivered after);
-        `blast_capped` (B,) m/s^2 is the acceleration the pulse asked of
-        each bone where the cap held some back (0: none)."""
+        `blast_capped` (B,) m/s^2 is the mean acceleration the pulse asked
+        of each bone over its part of the hold, where past the cap (else 0)."""
         air = self.air_velocity(com, t)
         force = _drag_per_bone(air, vel, axis, props)
         self.blast_active = False
@@ -110,15 +110,18 @@ class SceneLoads:
                 over = asked > MAX_ACCELERATION
                 blast[over] *= (MAX_ACCELERATION / asked[over])[:, None]
             else:
-                i0, arrival = e.impulse(com, t_blast, *args)
-                i1, _ = e.impulse(com, t_blast + dt, *args)
+                i0, arrival, duration = e.impulse(com, t_blast, *args)
+                i1, _, _ = e.impulse(com, t_blast + dt, *args)
                 if not i1.any():
                     continue
-                asked = np.linalg.norm(i1 - i0, axis=1) / (props.mass * dt)
                 blast = (self._capped(i1, t_blast + dt - arrival, props.mass)
                          - self._capped(i0, t_blast - arrival, props.mass)) / dt
-                # held back: the pulse asked more in this hold than the cap passed
-                over = asked > np.linalg.norm(blast, axis=1) / props.mass * (1 + 1e-9) + 1e-9
+                # what the pulse asked: its mean acceleration over its part of the hold
+                within = np.minimum(t_blast + dt, arrival + duration) - np.maximum(t_blast,
+                                                                                  arrival)
+                asked = np.where(within > 0, np.linalg.norm(i1 - i0, axis=1) / (
+                    props.mass * np.maximum(within, 1e-12)), 0.0)
+                over = asked > MAX_ACCELERATION
             self.blast_active = self.blast_active or bool(blast.any())
             np.maximum(self.blast_capped, np.where(over, asked, 0.0), out=self.blast_capped)
             force += blast
@@ -145,8 +148,8 @@ class SceneLoads:
         for e in self.explosions:
             if t + dt < e.time:
                 continue
-            total, arrival = e.impulse(com, math.inf, axis, props.wood_area, props.leaf_area,
-                                       props.diameter, 1.2)
+            total, arrival, _ = e.impulse(com, math.inf, axis, props.wood_area,
+                                          props.leaf_area, props.diameter, 1.2)
             pushed = np.linalg.norm(total, axis=1) / (props.mass * MAX_ACCELERATION)
             if t + dt >= arrival.min() and t <= max(e.window(com)[1],
                                                       float((arrival + pushed).max())):

@@ -35,7 +35,7 @@ from .chains.tier import StartState
 from .common import SimTree, TreeMotion, cap_note
 from .debris import MAX_SPIN
 from .events import TIER, Event
-from .linear import ERROR_TOLERANCE, RETURNABLE, HandOff, LinearStats, LinearTier
+from .linear import BLAST_SPLIT, ERROR_TOLERANCE, RETURNABLE, HandOff, LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .quality import Quality, nonlinear_engine
@@ -517,7 +517,7 @@ def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: floa
         notes.append(cap_note(merged))
     split = sum(s.split for s in linear)
     if split:
-        notes.append(f"{split} linear steps were split in 8 while a blast acted")
+        notes.append(f"{split} linear steps were split in {BLAST_SPLIT} while a blast pushed")
     refined = [r for s in linear for r in s.refined]
     if refined:
         t, tree, path, error = min(refined)
