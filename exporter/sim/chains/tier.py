@@ -221,7 +221,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 # update at the substep rate; so too while a blast pushes
                 # (its capped push turns twigs within one 8 ms hold: the
                 # audit found 3 % of its work unexplained)
-                ahead = 1 if self.contact_active or self.loads.blast_active else \
+                ahead = 1 if self.contact_active or self._blast_pushing(t) else \
                     self.update_every
                 self.forces(t, self.pose, self.prev,
                             max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
@@ -310,6 +310,15 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.ledger.record(frame, per_tree(e, self.bone_tree, len(self.trees)),
                            per_tree(self.load_work.pending(pose["com"]), self.bone_tree,
                                     len(self.trees)))
+
+    def _blast_pushing(self, t: float) -> bool:
+        """Whether a blast pushes the tier's bones within the next update's
+        hold (SceneLoads.blast_pushing, at the current pose)."""
+        if not self.loads.explosions:
+            return False
+        axis = self.pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
+        return self.loads.blast_pushing(t, self.update_every * self.h, self.pose["com"], axis,
+                                        self.props)
 
     def add_work(self, bone: int, joules: float) -> None:
         """Energy given to a bone's tree from outside (a projectile's hit)."""
