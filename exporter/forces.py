@@ -293,16 +293,6 @@ class Explosion:
         area = frontal_area(axis, direction, wood_area, leaf_area)
         return ((cd * drag + pulse) * area)[:, None] * direction, arrival, td
 
-    def window(self, points: np.ndarray) -> tuple[float, float]:
-        """Times (s) the front reaches the first of `points` (N, 3) m and the
-        positive phase has passed the last."""
-        _, _, _, td, arrival = self.front(points)
-        return float(arrival.min(initial=np.inf)), float((arrival + td).max(initial=self.time))
-
-    def passed(self, points: np.ndarray) -> float:
-        """Time (s) by which the positive phase has passed every point (N, 3) m."""
-        return self.window(points)[1]
-
     def reach(self, threshold: float = 500.0) -> float:
         """Distance (m) beyond which the peak overpressure is below
         `threshold` Pa (used to skip trees the blast cannot move)."""

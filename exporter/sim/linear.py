@@ -177,7 +177,8 @@ class LinearTier:
         self.cut_time = np.array([trees[k].cut.time if trees[k].cut is not None else np.inf
                                   for k in range(len(trees))])
         self.tip_arm = (b.tip0 - b.pivot0).T.copy()
-        self.axis0 = (b.tip0 - b.pivot0) / np.maximum(b.length, 1e-12)[:, None]
+        # when blasts push these bones (at rest: the steps split then)
+        self.blast_windows = self.loads.blast_windows(b.com0, self.model.axis0.T, b.props)
         top = np.zeros(len(trees))
         np.maximum.at(top, b.bone_tree, b.tip0[:, 2])
         low = np.full(len(trees), np.inf)
@@ -232,9 +233,8 @@ class LinearTier:
         model = self.model
         t0 = time.perf_counter()
         if self.part == 0:
-            b = self.bones
-            self.blast_step = self.loads.blast_pushing(self.t, self.h, b.com0, self.axis0,
-                                                       b.props)
+            self.blast_step = any(self.t + self.h >= first and self.t <= last
+                                  for first, last in self.blast_windows)
             self.parts = max(BLAST_SPLIT if self.blast_step else 1, self.stats.parts)
             if self.blast_step:
                 self.stats.split += 1

@@ -139,26 +139,31 @@ class SceneLoads:
         scale = np.where(size > limit, limit / np.maximum(size, 1e-300), 1.0)
         return impulse * scale[:, None]
 
+    def blast_windows(self, com: np.ndarray, axis: np.ndarray,
+                      props: BoneProps) -> list[tuple[float, float]]:
+        """When each blast pushes these bones (at `com` (B, 3) m along
+        `axis`), s: from its front's arrival at the first until its pulse,
+        and the capped push that delivers the rest of its impulse, are over
+        at the last."""
+        out = []
+        for e in self.explosions:
+            total, arrival, duration = e.impulse(com, math.inf, axis, props.wood_area,
+                                                 props.leaf_area, props.diameter, 1.2)
+            pushed = np.linalg.norm(total, axis=1) / (props.mass * MAX_ACCELERATION)
+            out.append((float(arrival.min(initial=np.inf)),
+                        float((arrival + np.maximum(duration, pushed)).max(initial=e.time))))
+        return out
+
     def blast_pushing(self, t: float, dt: float, com: np.ndarray, axis: np.ndarray,
                       props: BoneProps) -> bool:
-        """Whether a blast pushes any of these bones (at `com` (B, 3) m along
-        `axis`) within [t, t + dt] s: from its front's arrival at the first
-        until its pulse, and the capped push that delivers the rest of its
-        impulse, are over at the last."""
-        for e in self.explosions:
-            if t + dt < e.time:
-                continue
-            total, arrival, _ = e.impulse(com, math.inf, axis, props.wood_area,
-                                          props.leaf_area, props.diameter, 1.2)
-            pushed = np.linalg.norm(total, axis=1) / (props.mass * MAX_ACCELERATION)
-            if t + dt >= arrival.min() and t <= max(e.window(com)[1],
-                                                      float((arrival + pushed).max())):
-                return True
-        return False
+        """Whether a blast pushes any of these bones within [t, t + dt] s."""
+        return any(t + dt >= first and t <= last
+                   for first, last in self.blast_windows(com, axis, props))
 
-    def blasts_passed(self, t: float, points: np.ndarray) -> bool:
-        """Whether every blast's pulse has passed all `points` (N, 3) m by t s."""
-        return all(e.passed(points) < t for e in self.explosions)
+    def blasts_passed(self, t: float, com: np.ndarray, axis: np.ndarray,
+                      props: BoneProps) -> bool:
+        """Whether every blast's push on these bones is over by t s."""
+        return all(last < t for _, last in self.blast_windows(com, axis, props))
 
     def quiet_after(self, centre: np.ndarray, radius: float, height: float) -> float:
         """Time (s) after which no time-varying load reaches a tree whose

@@ -647,7 +647,7 @@ class ReferenceSolver:
         """Air, blasts, attractors and pulls (N, world, at the COMs), capped
         at MAX_ACCELERATION x mass; gravity is MuJoCo's."""
         n = self.n
-        axis = np.einsum("bij,bj->bi", self.rot, self.axis0)
+        axis = self._axes()
         force = self.loads.forces(t, self.com[:n], self.vcom[:n], axis, self.props,
                                   include_gravity=False, dt=self.dt_force)
         pulls = self.bones.pull_forces(t)
@@ -657,6 +657,10 @@ class ReferenceSolver:
         self.ledger.add_work(per_tree(self.load_work.update(force, self.com[:n]),
                                       self.bone_tree, len(self.trees)))
         return force
+
+    def _axes(self) -> np.ndarray:
+        """The bones' unit axes (B, 3) in the world now."""
+        return np.einsum("bij,bj->bi", self.rot, self.axis0)
 
     def _damping(self, g: _Group) -> None:
         """Structural damping as generalized forces (qfrc_applied): each
@@ -1029,7 +1033,8 @@ class ReferenceSolver:
         stays here until it has died down)."""
         if (not self.attached.all() or any(self.cut_state)
                 or any(g.projectiles for g in self.groups)
-                or not self.loads.blasts_passed(t, self.com[:self.n])):
+                or not self.loads.blasts_passed(t, self.com[:self.n], self._axes(),
+                                                self.props)):
             self.returning = 0.0
             return False
         n = self.n

@@ -26,10 +26,7 @@ class ChainEvents:
         cand = np.nonzero(self.breakable)[0]
         if not len(cand):
             return
-        s = self.state
-        j = self.prev_body[cand]
-        rel = s[cand, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
-        moment = self.k[self.body_bone[cand]] * (rel + self.rest[cand])
+        moment, rel = self._spring_moments(cand)
         at_limit = np.abs(rel) > 0.98 * self.cone[self.body_bone[cand]]
         for i in np.nonzero(at_limit)[0]:
             limit = self.joints[cand[i]][LIMIT]
@@ -43,13 +40,18 @@ class ChainEvents:
                 self.break_joint(int(b), t, pose, f"{total[b]:.0f} N m > strength "
                                                   f"{self.strength[b]:.0f} N m")
 
+    def _spring_moments(self, bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The spring moments (N m) at these bodies' joints, each in its
+        plane, and the joints' angles from their rest (rad)."""
+        s = self.state
+        j = self.prev_body[bodies]
+        rel = s[bodies, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
+        return self.k[self.body_bone[bodies]] * (rel + self.rest[bodies]), rel
+
     def joint_moments(self) -> np.ndarray:
         """Each bone's joint's bending moment (B,) N m from its springs in
         every plane (a cone limit's share aside: see check_breaks)."""
-        s = self.state
-        j = self.prev_body
-        rel = s[:, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
-        moment = self.k[self.body_bone] * (rel + self.rest)
+        moment, _ = self._spring_moments(np.arange(len(self.body_bone)))
         return np.sqrt(np.bincount(self.body_bone, moment * moment, minlength=self.n))
 
     def _remove_joint(self, body: int, which: tuple[int, ...] = (PIVOT, SPRING, LIMIT)) -> None:

@@ -30,7 +30,7 @@ class ChainForces:
         Steps the debris over `dt` with them."""
         n = self.n
         rot, com, cog = pose["rot"], pose["com"], pose["cog"]
-        axis = pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
+        axis = self._axes(pose)
         force = self.loads.forces(t, com, pose["vcom"], axis, self.props, dt=dt)
         pulls = self.bones.pull_forces(t)
         if pulls is not None:

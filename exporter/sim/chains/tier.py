@@ -282,7 +282,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         turning more than RETURN_TURN per linear step (in_return_range)."""
         if (not self.joint_alive.all() or self.in_debris.any() or self.cut_state
                 or self.projectiles is not None or self.contact_active
-                or not self.loads.blasts_passed(t, pose["com"])):
+                or not self.loads.blasts_passed(t, pose["com"], self._axes(pose), self.props)):
             self.returning = 0.0
             return False
         q, v = hinges_from_pose(self.bones, pose["rot"], pose["omega"])
@@ -311,14 +311,15 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                            per_tree(self.load_work.pending(pose["com"]), self.bone_tree,
                                     len(self.trees)))
 
+    def _axes(self, pose: dict) -> np.ndarray:
+        """The bones' unit axes (B, 3) in `pose`."""
+        return pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
+
     def _blast_pushing(self, t: float) -> bool:
         """Whether a blast pushes the tier's bones within the next update's
         hold (SceneLoads.blast_pushing, at the current pose)."""
-        if not self.loads.explosions:
-            return False
-        axis = self.pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
-        return self.loads.blast_pushing(t, self.update_every * self.h, self.pose["com"], axis,
-                                        self.props)
+        return bool(self.loads.explosions) and self.loads.blast_pushing(
+            t, self.update_every * self.h, self.pose["com"], self._axes(self.pose), self.props)
 
     def add_work(self, bone: int, joules: float) -> None:
         """Energy given to a bone's tree from outside (a projectile's hit)."""
