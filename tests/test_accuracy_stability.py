@@ -4,10 +4,17 @@ README "Quality levels"). Each bound says why it is where it is."""
 
 import math
 
+import numpy as np
 import pytest
-
 from treebake.accuracy import SETTINGS, pareto, run_case
-from treebake.stress import ENERGY_TOLERANCE, GAIN_TOLERANCE, GAP_TOLERANCE, cases, run
+from treebake.stress import (
+    ENERGY_TOLERANCE,
+    GAIN_TOLERANCE,
+    GAP_TOLERANCE,
+    cases,
+    event_growth,
+    run,
+)
 
 
 @pytest.fixture(scope="module")
@@ -66,3 +73,18 @@ def test_stress_case(name, solver, level):
     assert r.gap <= GAP_TOLERANCE  # joints hold, measured on the bake
     assert not math.isnan(r.rest)
     assert r.passed
+
+
+def test_the_stress_suites_event_rule_passes_a_fall_and_fails_a_push():
+    # a body falling from rest after the forcing stopped (t >= 1 s): its
+    # kinetic energy grows (the kinetic rule would call it unstable), its
+    # kinetic + gravitational energy does not; a push of 5 % of the peak
+    # kinetic energy at t = 2 s must show (as 5 % of the new peak, 1.05x)
+    t = np.arange(0.0, 3.0, 1 / 24)
+    fall = np.clip(t - 1.0, 0.0, None)
+    kinetic = 0.5 * 9.81**2 * fall**2  # per kg
+    height = 20.0 - 0.5 * 9.81 * fall**2
+    after = t >= 1.0
+    assert event_growth(kinetic, 9.81 * height, after) < 1e-9
+    push = np.where(t >= 2.0, 0.05 * kinetic.max(), 0.0)
+    assert abs(event_growth(kinetic + push, 9.81 * height, after) - 0.05 / 1.05) < 1e-3

@@ -5,6 +5,14 @@ k d - c v_z (never pulling) and Coulomb friction against its sliding
 velocity. The spring-damper is tuned to the point's effective mass m_eff so
 that an update held for `dt` stays stable: omega = 0.5 / dt (omega dt = 0.5)
 and damping ratio 0.7, i.e. k = m_eff omega^2, c = 1.4 m_eff omega.
+
+The spring holds 1/2 k d^2 while pressed in (`stored_energy`): the energy
+audit counts it, as it counts the joints' springs, or a bounce that gives
+it back reads as energy made up. A point that starts deep (a limb that
+becomes debris where its chain's contact let it sink) is given that depth
+as an allowance (`Sunk`): the ground holds it there and pushes back only
+against further sinking, so a change of model never fires a spring that
+nothing compressed.
 """
 
 from __future__ import annotations
@@ -26,9 +34,7 @@ def ground_forces(points: np.ndarray, velocity: np.ndarray, radius: np.ndarray,
     if not hit.any():
         return out
     m = mass[hit]
-    omega = 0.5 / dt
-    k = m * omega**2
-    c = 2 * DAMPING_RATIO * m * omega
+    k, c = _spring(m, dt)
     v = velocity[hit]
     normal = np.maximum(k * depth[hit] - c * v[:, 2], 0.0)
     slide = v[:, :2]
@@ -45,3 +51,37 @@ def effective_mass(mass: np.ndarray, inertia: np.ndarray, arm: np.ndarray) -> np
     of mass presents: 1 / (1/m + |arm|^2 / I) with I the body's smallest
     moment of inertia (kg m^2) — the free-body value, below the pinned one."""
     return 1.0 / (1.0 / mass + (arm * arm).sum(1) / np.maximum(inertia, 1e-12))
+
+
+def _spring(mass: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Penalty stiffness (N/m) and damping (N s/m) for effective masses (kg)
+    and a hold of dt s."""
+    omega = 0.5 / dt
+    return mass * omega**2, 2 * DAMPING_RATIO * mass * omega
+
+
+def stored_energy(points: np.ndarray, radius: np.ndarray, mass: np.ndarray,
+                  dt: float) -> np.ndarray:
+    """Elastic energy (J) per point of ground_forces' springs: 1/2 k d^2 at
+    depth d = radius - z > 0 (m), k as ground_forces sets it."""
+    depth = np.maximum(radius - points[:, 2], 0.0)
+    return 0.5 * _spring(mass, dt)[0] * depth * depth
+
+
+class Sunk:
+    """Per contact point, the depth (m) it may keep without being pushed:
+    set when the point first takes part at some depth, it only shrinks as
+    the point rises (never a push the model did not compress)."""
+
+    def __init__(self):
+        self.depth = np.zeros(0)
+
+    def extend(self, depth: np.ndarray) -> None:
+        """New points at these depths (m; <= 0 above ground)."""
+        self.depth = np.concatenate([self.depth, np.maximum(depth, 0.0)])
+
+    def radius(self, radius: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """The contact radius (m) to use now, after shrinking each allowance
+        to the point's present depth."""
+        self.depth = np.minimum(self.depth, np.maximum(radius - points[:, 2], 0.0))
+        return radius - self.depth

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..rotations import apply, compose, cross, matrices_from_rotvec
-from .contact import effective_mass, ground_forces
+from .contact import Sunk, effective_mass, ground_forces, stored_energy
 
 MAX_STEP = 1 / 480  # s, the longest rigid-body step (a force update is split into these)
 ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
@@ -46,6 +46,9 @@ class Debris:
         self.asleep = np.zeros(0, dtype=bool)
         self.clamped = 0  # body substeps whose spin was clamped to MAX_SPIN
         self.work = np.zeros(len(mass))  # J per bone: work of the loads other than gravity
+        # ground allowances of each bone's two ends (contact.Sunk), body order
+        self.sunk_pivot, self.sunk_tip = Sunk(), Sunk()
+        self.contact_step = MAX_STEP  # s, the substep the contact springs were last set for
 
     @property
     def count(self) -> int:
@@ -91,6 +94,12 @@ class Debris:
         self.asleep = np.append(self.asleep, asleep)
         if asleep:
             self.v[-1] = self.w[-1] = self.ang[-1] = 0.0
+        # the part's chain touched the ground at its bones' tips only, with
+        # its own contact springs: ends already in the soil stay there
+        pivot = pose["pivot"][bones]
+        tip = pivot + apply(rot, self.tip0[bones] - self.pivot0[bones])
+        self.sunk_pivot.extend(self.radius[bones] - pivot[:, 2])
+        self.sunk_tip.extend(self.radius[bones] - tip[:, 2])
 
     def loads(self, force: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-body force and torque about the body COM from per-bone forces
@@ -188,19 +197,40 @@ class Debris:
             self.ang[newly] = 0.0
             self.asleep |= newly
 
-    def _contact(self, h: float):
-        """Ground forces and torques on each body from its bones' two ends."""
+    def _ends(self, shrink: bool = False):
+        """Both ends of every debris bone (pivots, then tips), their owner
+        bodies, contact radii (less their allowances; `shrink` updates
+        those to the ends' present depths) and effective masses."""
         r = self.r[self.owner]
         rot = compose(r, self.rot0)
         pivot = self.x[self.owner] + apply(r, self.arm_pivot)
         tip = pivot + apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
+        full = self.radius[self.bones]
+        if shrink:
+            radius = np.concatenate([self.sunk_pivot.radius(full, pivot),
+                                     self.sunk_tip.radius(full, tip)])
+        else:
+            radius = np.concatenate([full - self.sunk_pivot.depth, full - self.sunk_tip.depth])
         ends = np.concatenate([pivot, tip])
         owner = np.concatenate([self.owner, self.owner])
-        radius = np.concatenate([self.radius[self.bones]] * 2)
         arm = ends - self.x[owner]
-        vel = self.v[owner] + cross(self.w[owner], arm)
         i_min = np.linalg.eigvalsh(self.i_body)[:, 0]
-        m_eff = effective_mass(self.m[owner], i_min[owner], arm)
+        return ends, owner, radius, arm, effective_mass(self.m[owner], i_min[owner], arm)
+
+    def contact_energy(self) -> np.ndarray:
+        """Elastic energy (J) per debris bone (in `self.bones` order) held
+        in its ends' ground springs (contact.stored_energy)."""
+        if not self.count or not self.ground:
+            return np.zeros(len(self.bones))
+        ends, _, radius, _, m_eff = self._ends()
+        e = stored_energy(ends, radius, m_eff, self.contact_step)
+        return e[:len(self.bones)] + e[len(self.bones):]
+
+    def _contact(self, h: float):
+        """Ground forces and torques on each body from its bones' two ends."""
+        ends, owner, radius, arm, m_eff = self._ends(shrink=True)
+        vel = self.v[owner] + cross(self.w[owner], arm)
+        self.contact_step = h
         f = ground_forces(ends, vel, radius, m_eff, h)
         n = self.count
         force = np.stack([np.bincount(owner, f[:, a], minlength=n) for a in range(3)], 1)

@@ -11,7 +11,7 @@ import numpy as np
 from ...rotations import apply, apply_transposed, cross
 from ..audit import per_tree
 from ..common import cap_loads
-from ..contact import effective_mass, ground_forces
+from ..contact import effective_mass, ground_forces, stored_energy
 from ..loads import BoneProps
 
 REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (8 let a
@@ -181,10 +181,23 @@ class ChainForces:
             torque[:, ax] += np.bincount(b, tq[:, ax], minlength=n)
 
     def _ground(self, pose: dict, dt: float):
-        """Ground contacts of the chain bones: every bone's tip, and the
+        """Ground contacts of the chain bones (`_touching`), and their forces
+        for an update held dt s. Returns the touching bones, the contact
+        points and the forces, or None."""
+        touching = self._touching(pose)
+        if touching is None:
+            return None
+        owner, ends, radius, arm, m_eff = touching
+        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
+        self.contact_dt = dt
+        return owner, ends, ground_forces(ends, vel, radius, m_eff, dt)
+
+    def _touching(self, pose: dict):
+        """The chain bones' points in the ground: every bone's tip, and the
         base of every bone no longer held by its joint (a root bone's base
-        is its anchor, not a contact); debris handles its own. Returns the
-        touching bones, the contact points and the forces, or None."""
+        is its anchor, not a contact); debris handles its own. Returns their
+        bones, points, radii (m), arms from the bones' COGs and effective
+        masses (kg), or None; sets `contact_active` when any comes near."""
         tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
         loose = np.nonzero(~self.joint_alive)[0]
         ends = np.concatenate([tips, pose["pivot"][loose]])
@@ -201,10 +214,23 @@ class ChainForces:
             return None
         ends, owner, radius = ends[near], owner[near], radius[near]
         arm = ends - pose["cog"][owner]
-        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
-        f = ground_forces(ends, vel, radius, m_eff, dt)
-        return owner, ends, f
+        return owner, ends, radius, arm, m_eff
+
+    def contact_energy(self, pose: dict) -> np.ndarray:
+        """Elastic energy (J) per bone held in the ground's contact springs,
+        the chains' (at the hold they were last set for) and the debris'."""
+        out = np.zeros(self.n)
+        if not self.scene.ground:
+            return out
+        active = self.contact_active
+        touching = self._touching(pose)
+        self.contact_active = active  # a look, not an update
+        if touching is not None:
+            owner, ends, radius, _, m_eff = touching
+            np.add.at(out, owner, stored_energy(ends, radius, m_eff, self.contact_dt))
+        out[self.debris.bones] += self.debris.contact_energy()
+        return out
 
     def apply_impulse(self, bone: int, impulse: np.ndarray, point: np.ndarray,
                       pose: dict) -> None:

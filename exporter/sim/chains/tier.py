@@ -182,6 +182,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.fresh = True
         self.next_update = self.last_update = substep
         self.contact_active = False
+        self.contact_dt = self.h  # s, the hold the ground's springs were last set for
         self.refine = 1
         first = substep // self.spf
         self.first_frame = first
@@ -293,7 +294,8 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
 
     def _audit(self, frame: int, pose: dict) -> None:
         """Record each tree's energy (audit.py): its bones' (debris included)
-        kinetic and gravitational energy and its live springs'; the work of
+        kinetic and gravitational energy, its live springs' and the ground's
+        contact springs' (contact.stored_energy); the work of
         the debris' loads joins the ledger here."""
         e = bone_energy(self.mass, self.inertia, pose["rot"], pose["com"], pose["vcom"],
                         pose["omega"], -self.loads.g[2])
@@ -305,6 +307,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 eps = a - spring.b.angle - spring.rest_angle
                 springs[i] = 0.5 * spring.stiffness * eps * eps
         e += np.bincount(self.body_bone, springs, minlength=self.n)
+        e += self.contact_energy(pose)
         self.ledger.add_work(per_tree(self.debris.work, self.bone_tree, len(self.trees)))
         self.debris.work[:] = 0.0
         self.ledger.record(frame, per_tree(e, self.bone_tree, len(self.trees)),
