@@ -174,16 +174,21 @@ def cases(long: bool = True) -> list[Case]:
     return [c for c in out if long or not c.long]
 
 
+def _segment_masses(bake: Bake) -> tuple[np.ndarray, np.ndarray]:
+    """The first tree's segment midpoints per frame (F, S, 3) m and masses
+    (S,) (solid cylinders of unit density), from the baked motion alone."""
+    t = bake.trees[0]
+    ends = segment_ends(t, np.arange(t.n_segments))
+    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
+    return 0.5 * (t.positions + ends), np.pi / 4 * t.width**2 * length
+
+
 def kinetic_energy(bake: Bake) -> np.ndarray:
     """Translational kinetic energy per frame interval (relative units: solid
     cylinders of unit density), from the baked motion alone."""
-    t = bake.trees[0]
-    if t.static:
+    if bake.trees[0].static:
         return np.zeros(len(bake.times) - 1)
-    ends = segment_ends(t, np.arange(t.n_segments))
-    mids = 0.5 * (t.positions + ends)
-    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
-    mass = np.pi / 4 * t.width**2 * length
+    mids, mass = _segment_masses(bake)
     v = np.diff(mids, axis=0) * bake.fps
     return 0.5 * (mass[None, :, None] * v * v).sum(axis=(1, 2))
 
@@ -216,10 +221,7 @@ def centre_rise(bake: Bake) -> float:
     cut = next((e["time"] for e in t.info.get("events", []) if e["kind"] == "cut"), None)
     if cut is None or t.static:
         return math.nan
-    ends = segment_ends(t, np.arange(t.n_segments))
-    mids = 0.5 * (t.positions + ends)
-    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
-    mass = np.pi / 4 * t.width**2 * length
+    mids, mass = _segment_masses(bake)
     z = (mids[..., 2] * mass).sum(1) / mass.sum()
     f = int(math.floor(cut * bake.fps))
     return float(z[f:].max() - z[f])
@@ -228,14 +230,10 @@ def centre_rise(bake: Bake) -> float:
 def gravitational_energy(bake: Bake) -> np.ndarray:
     """Gravitational energy per frame interval (the units of
     kinetic_energy, at the interval's mean height), from the bake alone."""
-    t = bake.trees[0]
-    if t.static:
+    if bake.trees[0].static:
         return np.zeros(len(bake.times) - 1)
-    ends = segment_ends(t, np.arange(t.n_segments))
-    z = 0.5 * (t.positions[..., 2] + ends[..., 2])
-    length = np.linalg.norm(t.points[t.seg_end] - t.points[t.seg_start], axis=1)
-    mass = np.pi / 4 * t.width**2 * length
-    pe = 9.81 * (z * mass).sum(1)
+    mids, mass = _segment_masses(bake)
+    pe = 9.81 * (mids[..., 2] * mass).sum(1)
     return 0.5 * (pe[1:] + pe[:-1])
 
 
@@ -250,21 +248,29 @@ def event_growth(kinetic: np.ndarray, gravitational: np.ndarray, after: np.ndarr
     return float((total - np.minimum.accumulate(total)).max() / max(kinetic.max(), 1e-12))
 
 
+def window_growth(kinetic: np.ndarray, t: np.ndarray, quiet: float) -> float:
+    """The largest growth of the peak kinetic energy from one 1 s window to
+    the next after `quiet` s (fraction), intervals ending at times t (s)."""
+    starts = np.arange(quiet, t[-1] - 1.0 + 1e-9, 1.0)
+    peaks = [kinetic[(t >= a) & (t < a + 1.0)].max() for a in starts]
+    floor = REST_FRACTION * (kinetic.max() if len(kinetic) else 0.0)
+    growth = 0.0
+    for a, b in itertools.pairwise(peaks):
+        if a > floor:  # growth between windows already at rest is round-off
+            growth = max(growth, b / a - 1.0)
+    return growth
+
+
 def measure(bake: Bake, quiet: float, event: bool = False) -> tuple[float, float, float]:
     """Energy growth after `quiet` (of kinetic plus gravitational energy in
     an `event` case), largest spin (rad/s), time to rest (s)."""
     ke = kinetic_energy(bake)
     t = bake.times[1:]
     after = t >= quiet
-    growth = 0.0
     if event:
         growth = event_growth(ke, gravitational_energy(bake), after)
-    starts = np.arange(quiet, t[-1] - 1.0 + 1e-9, 1.0)
-    peaks = [] if event else [ke[(t >= a) & (t < a + 1.0)].max() for a in starts]
-    floor = REST_FRACTION * (ke.max() if len(ke) else 0.0)
-    for a, b in itertools.pairwise(peaks):
-        if a > floor:  # growth between windows already at rest is round-off
-            growth = max(growth, b / a - 1.0)
+    else:
+        growth = window_growth(ke, t, quiet)
     tree = bake.trees[0]
     rot = tree.rotations.astype(float)
     spin = 0.0
