@@ -184,7 +184,7 @@ class ChainForces:
         """Ground contacts of the chain bones (`_touching`), and their forces
         for an update held dt s. Returns the touching bones, the contact
         points and the forces, or None."""
-        touching = self._touching(pose)
+        touching, self.contact_active = self._touching(pose)
         if touching is None:
             return None
         owner, ends, radius, arm, m_eff = touching
@@ -197,7 +197,7 @@ class ChainForces:
         base of every bone no longer held by its joint (a root bone's base
         is its anchor, not a contact); debris handles its own. Returns their
         bones, points, radii (m), arms from the bones' COGs and effective
-        masses (kg), or None; sets `contact_active` when any comes near."""
+        masses (kg), or None; and whether any comes within CONTACT_MARGIN."""
         tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
         loose = np.nonzero(~self.joint_alive)[0]
         ends = np.concatenate([tips, pose["pivot"][loose]])
@@ -209,13 +209,13 @@ class ChainForces:
             [self.tip0[:, 2], self.pivot0[loose, 2]]), 0.0))
         low = ends[:, 2] < radius + CONTACT_MARGIN
         near = (ends[:, 2] < radius) & ~self.in_debris[owner]
-        self.contact_active = bool((low & ~self.in_debris[owner]).any())
+        active = bool((low & ~self.in_debris[owner]).any())
         if not near.any():
-            return None
+            return None, active
         ends, owner, radius = ends[near], owner[near], radius[near]
         arm = ends - pose["cog"][owner]
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
-        return owner, ends, radius, arm, m_eff
+        return (owner, ends, radius, arm, m_eff), active
 
     def contact_energy(self, pose: dict) -> np.ndarray:
         """Elastic energy (J) per bone held in the ground's contact springs,
@@ -223,9 +223,7 @@ class ChainForces:
         out = np.zeros(self.n)
         if not self.scene.ground:
             return out
-        active = self.contact_active
-        touching = self._touching(pose)
-        self.contact_active = active  # a look, not an update
+        touching, _ = self._touching(pose)
         if touching is not None:
             owner, ends, radius, _, m_eff = touching
             np.add.at(out, owner, stored_energy(ends, radius, m_eff, self.contact_dt))
