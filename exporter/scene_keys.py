@@ -194,9 +194,12 @@ QUALITY = table(
         "during blasts)", "Hz", None, 1.0, 10_000.0, doc_default=_levels("linear_rate")),
     Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
         "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
-        "installed, else pymunk; cuts and ground contact always pymunk), "
+        "installed, else pymunk; ground contact always pymunk, a cut as `cut_engine` says), "
         "`reference` or `pymunk`", kind="choice", choices=("auto", "reference", "pymunk"),
         doc_default=_levels("nonlinear")),
+    Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` "
+        "(robust at any step) or `nonlinear` (the reference when installed)",
+        kind="choice", choices=("pymunk", "nonlinear"), doc_default=_levels("cut_engine")),
     Key("reference_step", "the reference's step when it is the nonlinear engine", "s", None,
         1e-5, 1 / 60, doc_default=_levels("reference_step")),
     Key("substep_rate", "physics steps per second (split further, automatically, during "

@@ -104,17 +104,18 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
 
     def engine_for(kind: str) -> str:
         """A cut and a tip at the ground go to the pymunk tier, robust at
-        every step; large motion in the wind, a joint near breaking and
-        trees a projectile can reach go to the reference when it is the
-        engine: its hinges are the linear tier's coordinates, at a coarse
-        step it beats pymunk there (out/accuracy: boxes 0.16 % RMS at 1/480 s
-        against 0.56 % at about the same cost; a crate smashes the sapling
-        as in the truth, where the planar chains lost one twig), and where a
-        blast breaks branches the planar chains gained 0.1-3 % of energy the
-        loads did not supply (sapling, 6-15 kg at 3-5 m), the reference
-        none."""
+        every step (a cut at `final` to the reference: quality.cut_engine);
+        large motion in the wind, a joint near breaking and trees a
+        projectile can reach go to the reference when it is the engine: its
+        hinges are the linear tier's coordinates, at a coarse step it beats
+        pymunk there (out/accuracy: boxes 0.16 % RMS at 1/480 s against
+        0.56 % at about the same cost; a crate smashes the sapling as in the
+        truth, where the planar chains lost one twig), and where a blast
+        breaks branches the planar chains gained 0.1-3 % of energy the loads
+        did not supply (sapling, 6-15 kg at 3-5 m), the reference none."""
         if engine == "reference" and quality.nonlinear == "auto" and \
-                kind not in ("turn", "cone", "break", "projectile"):
+                kind not in ("turn", "cone", "break", "projectile") and \
+                not (kind == "cut" and quality.cut_engine == "nonlinear"):
             return "pymunk"
         return engine
 
