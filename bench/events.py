@@ -19,6 +19,7 @@ bakes alone (independent of either solver's bookkeeping):
 
     python bench/events.py [--cases felling boxes blast] [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
+                           [--quality final]      # the LOD's level (default: the scene's)
 
 A blast on a sapling is the case to convergence-check (`--timestep`): the
 reference's peak twig moments ("closest to breaking", the largest moment /
@@ -43,6 +44,7 @@ from treebake.accuracy import event_metrics  # noqa: E402
 from treebake.pipeline import bake_scene  # noqa: E402
 from treebake.sim.events import Event  # noqa: E402
 from treebake.scene import load_scene, parse_scene  # noqa: E402
+from treebake.sim.quality import QUALITIES  # noqa: E402
 from treebake.sway import segment_ends  # noqa: E402
 
 G = 9.81
@@ -131,20 +133,26 @@ def main() -> None:
     ap.add_argument("--solvers", nargs="*", default=["planar", "full"])
     ap.add_argument("--timestep", type=Fraction, default=None,
                     help="the full reference's step, s (e.g. 1/64000; default: its own)")
+    ap.add_argument("--quality", choices=list(QUALITIES), default=None,
+                    help="the planar LOD's level (default: the scene's own)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
+    level = QUALITIES[args.quality] if args.quality else None
     step = float(args.timestep) if args.timestep else None
     rows = []
     for case in args.cases:
         for solver in args.solvers:
             scene = CASES[case]()
             bake = bake_scene(scene, solver=solver, workers=1,
-                              timestep=step if solver == "full" else None)
+                              timestep=step if solver == "full" else None,
+                              quality=level if solver == "planar" else None)
             m = measure(bake, scene)
-            m.update(case=case, solver=solver, timestep=bake.meta.get("substep"))
+            m.update(case=case, solver=solver, timestep=bake.meta.get("substep"),
+                     quality=args.quality if solver == "planar" else None)
             rows.append(m)
+            label = f"{solver} {args.quality}" if solver == "planar" and args.quality else solver
             for t in m["trees"]:
-                print(f"{case:<8} {solver:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
+                print(f"{case:<8} {label:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
                       f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
                       f"{t['com_max_after_start']:.2f} -> end {t['com_end']:.2f}  broken "
                       f"{t['broken']:>3}  farthest {t['farthest_part_m']:.1f} m  peak "
@@ -166,6 +174,8 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = f"events-{args.timestep}".replace("/", "_") if args.timestep else "events"
+    if args.quality:
+        name += f"-{args.quality}"
     (out / f"{name}.json").write_text(json.dumps(rows, indent=2, default=str) + "\n")
 
 

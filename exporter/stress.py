@@ -223,7 +223,7 @@ def centre_rise(bake: Bake) -> float:
         return math.nan
     mids, mass = _segment_masses(bake)
     z = (mids[..., 2] * mass).sum(1) / mass.sum()
-    f = int(math.floor(cut * bake.fps))
+    f = math.floor(cut * bake.fps)
     return float(z[f:].max() - z[f])
 
 

@@ -239,3 +239,23 @@ def test_a_blast_is_handed_over_before_a_joint_passes_its_strength(tmp_path, roo
     assert len(handed) == 1 and 0.5 < handed[0] < 0.5 + 1 / 48, events
     broke = [e["time"] for e in events if e["kind"] in ("broke", "uprooted")]
     assert all(t > handed[0] + 1e-3 for t in broke), events
+
+
+def test_a_cut_at_final_goes_to_the_reference_or_says_why_not(tmp_path, root, monkeypatch):
+    """`final` hands a felled tree to the reference (Quality.cut_engine);
+    without MuJoCo it falls on the pymunk tier, and the bake's notes say
+    that the reference is missing rather than leaving it to be guessed."""
+    pytest.importorskip("mujoco")
+    from treebake.sim import quality
+
+    grammar = (root / "grammars" / "sapling.lsys").read_text()
+    fell = {"duration": 1.5, "quality": "final",
+            "cut": [{"tree": 0, "time": 0.5, "direction": 30.0}]}
+    for installed in (True, False):
+        monkeypatch.setattr(quality, "reference_available", lambda installed=installed: installed)
+        (tmp_path / str(installed)).mkdir()
+        b = bake(tmp_path / str(installed), grammar, **fell)
+        engine = "reference" if installed else "pymunk"
+        assert b.trees[0].info["solver"].startswith(f"linear, then {engine} at 0.500 s")
+        missing = [n for n in b.meta["notes"] if "MuJoCo is not installed" in n]
+        assert bool(missing) != installed, b.meta["notes"]

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..scene import Scene
+from . import quality as quality_levels
 from .chains import PymunkTier, Stats
 from .chains.forces import MAX_REFINE
 from .chains.tier import StartState
@@ -452,6 +453,13 @@ class PlanarLOD:
                 tiers[self.trees[i].name] = use.tier if use.switch is None else \
                     f"{use.tier} at {use.switch:.3f} s ({use.reason})"
         notes = lod_notes(st, lin, quality, meta["substep"])
+        fallback = sum("pymunk" in use.tier for c in chunks for use in c.tiers)
+        if fallback and quality.tier == "auto" and quality.nonlinear == "auto" \
+                and not quality_levels.reference_available():
+            notes.append(f"nonlinear engine: pymunk for {fallback} tree"
+                         f"{'s' if fallback > 1 else ''}, as MuJoCo is not installed "
+                         "(pip install 'treebake[reference]': the reference, more accurate "
+                         "for large motion, hits and felling)")
         refs = [r for c in chunks for r in c.reference]
         back = sorted(b for c in chunks for b in c.came_back)
         stats["returned"] = len(back)
