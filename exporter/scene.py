@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from . import library
 from .errors import InputError, SceneError
 from .names import MAX_TREE_NAME, is_valid, make_valid
 from .scene_keys import (
@@ -434,11 +435,24 @@ def _tree_name(r: _Reader, t: dict, p: str, given: set[str]) -> str:
     return name
 
 
+def _grammar_file(r: _Reader, value: str, key: str, base: Path) -> Path:
+    """A scene's grammar: a file relative to the scene, else a bundled
+    grammar named as on the command line (`oak`, `grammar:forest/birch`)."""
+    path = base / value
+    if path.is_file():
+        return path
+    name = value.removeprefix(library.GRAMMAR_PREFIX)
+    bundled = library.grammars_folder() / f"{name}.lsys"
+    if (value.startswith(library.GRAMMAR_PREFIX) or not Path(value).suffix) \
+            and ".." not in Path(name).parts and bundled.is_file():
+        return bundled
+    raise r.fail(key, f"file not found: {path} (nor a bundled grammar of that name: "
+                      "`treebake list` shows them)")
+
+
 def _tree(r: _Reader, t: dict, p: str, base: Path) -> TreeSpec:
     r.check_keys(t, p, TREE)
-    grammar = base / r.key(t, TREE["grammar"], p)
-    if not grammar.is_file():
-        raise r.fail(f"{p}grammar", f"file not found: {grammar}")
+    grammar = _grammar_file(r, r.key(t, TREE["grammar"], p), f"{p}grammar", base)
     return TreeSpec(**r.keys(t, TREE, p, grammar=grammar,
                              name=_tree_name(r, t, p, r.tree_names)))
 
@@ -450,12 +464,7 @@ def _forest(r: _Reader, f: dict, base: Path, scene_seed: int, first: int) -> lis
     if not isinstance(grammars, list) or not grammars or not all(
             isinstance(g, str) for g in grammars):
         raise r.fail(f"{p}grammars", "must be a non-empty list of grammar file paths")
-    paths = []
-    for g in grammars:
-        path = base / g
-        if not path.is_file():
-            raise r.fail(f"{p}grammars", f"file not found: {path}")
-        paths.append(path)
+    paths = [_grammar_file(r, g, f"{p}grammars", base) for g in grammars]
     count = r.key(f, FOREST["count"], p)
     area = r.key(f, FOREST["area"], p)
     center = r.key(f, FOREST["center"], p)

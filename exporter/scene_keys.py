@@ -51,7 +51,8 @@ TOP = table(
 )
 
 TREE = table(
-    Key("grammar", "grammar file (docs/grammar.md), relative to the scene file", "path",
+    Key("grammar", "grammar file (docs/grammar.md), relative to the scene file, or a "
+        "bundled grammar's name (`oak`, `grammar:forest/birch`; `treebake list`)", "path",
         kind="string"),
     Key("name", "tree name in files and messages (letters, digits and `_`, starting with a "
         "letter or `_`: names every tool keeps)", kind="string",
@@ -68,7 +69,8 @@ TREE = table(
 )
 
 FOREST = table(
-    Key("grammars", "grammar files, used in turn", "paths", kind="list"),
+    Key("grammars", "grammar files (or bundled grammars' names, as `grammar`), used in turn",
+        "paths", kind="list"),
     Key("count", "number of trees", "", None, 0, MAX_TREES, "integer"),
     Key("area", "width and depth of the forest", "m", None, 1.0, 1e5, "vector", n=2),
     Key("center", "centre of the area", "m", (0.0, 0.0), -1e6, 1e6, "vector", n=2),

@@ -85,3 +85,22 @@ def test_load_errors_name_the_file(tmp_path):
         load_scene(bad)
     with pytest.raises(SceneError, match="cannot read scene"):
         load_scene(tmp_path / "none.toml")
+
+
+def test_a_scene_names_bundled_grammars_as_the_command_line_does(tmp_path):
+    # `treebake bake oak` works, so `grammar = "oak"` in a scene must too; a
+    # file of that name beside the scene comes first
+    from treebake import library
+
+    scene = parse_scene({"tree": [{"grammar": "oak"}, {"grammar": "grammar:forest/birch"}],
+                         "forest": {"grammars": ["sapling"], "count": 2, "area": [20, 20]}},
+                        file="s.toml", base=tmp_path)
+    paths = [t.grammar for t in scene.trees]
+    assert paths[:3] == [library.grammar_path("oak"), library.grammar_path("forest/birch"),
+                         library.grammar_path("sapling")]
+    (tmp_path / "oak").write_text((PRESETS.parent / "grammars" / "sapling.lsys").read_text())
+    own = parse_scene({"tree": [{"grammar": "oak"}]}, file="s.toml", base=tmp_path)
+    assert own.trees[0].grammar == tmp_path / "oak"
+    for missing in ("nope", "grammar:nope", "oak.lsys", "../grammars/oak"):
+        scene_error({"tree": [{"grammar": missing}]},
+                    r"tree\[0\]\.grammar: file not found: .*nor a bundled grammar")
