@@ -441,10 +441,11 @@ def _grammar_file(r: _Reader, value: str, key: str, base: Path) -> Path:
     path = base / value
     if path.is_file():
         return path
-    name = value.removeprefix(library.GRAMMAR_PREFIX)
+    name = Path(value.removeprefix(library.GRAMMAR_PREFIX))
     bundled = library.grammars_folder() / f"{name}.lsys"
-    if (value.startswith(library.GRAMMAR_PREFIX) or not Path(value).suffix) \
-            and ".." not in Path(name).parts and bundled.is_file():
+    # a name inside the bundle only: not a path out of it ("..", absolute)
+    if (value.startswith(library.GRAMMAR_PREFIX) or not name.suffix) \
+            and not name.is_absolute() and ".." not in name.parts and bundled.is_file():
         return bundled
     raise r.fail(key, f"file not found: {path} (nor a bundled grammar of that name: "
                       "`treebake list` shows them)")

@@ -101,6 +101,7 @@ def test_a_scene_names_bundled_grammars_as_the_command_line_does(tmp_path):
     (tmp_path / "oak").write_text((PRESETS.parent / "grammars" / "sapling.lsys").read_text())
     own = parse_scene({"tree": [{"grammar": "oak"}]}, file="s.toml", base=tmp_path)
     assert own.trees[0].grammar == tmp_path / "oak"
-    for missing in ("nope", "grammar:nope", "oak.lsys", "../grammars/oak"):
+    outside = str(PRESETS.parent / "grammars" / "oak")  # absolute: not a bundled name
+    for missing in ("nope", "grammar:nope", "oak.lsys", "../grammars/oak", outside):
         scene_error({"tree": [{"grammar": missing}]},
                     r"tree\[0\]\.grammar: file not found: .*nor a bundled grammar")
