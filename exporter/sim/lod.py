@@ -475,7 +475,7 @@ class PlanarLOD:
             stats["debris"] += sum(r.meta["stats"]["parts"] for r in refs)
             closest = [r.meta["stats"]["closest_to_breaking"] for r in refs
                        if "closest_to_breaking" in r.meta["stats"]]
-            if closest:  # on the joints the reference held (the tiers do not keep it)
+            if closest:  # any joint the reference ran, broken ones included (the tiers keep none)
                 stats["closest_to_breaking"] = max(closest, key=lambda c: c["fraction"])
             from .reference import FREE_PART_COUNTS, free_part_notes
 
