@@ -83,7 +83,8 @@ def presets() -> list[Entry]:
 def grammar_path(name: str) -> Path:
     """A bundled grammar by name (`oak`, `forest/birch`)."""
     path = grammars_folder() / f"{name}.lsys"
-    if ".." in Path(name).parts or not path.is_file():
+    # a name inside the bundle only, not a path out of it ("..", absolute)
+    if ".." in Path(name).parts or Path(name).is_absolute() or not path.is_file():
         known = ", ".join(e.name for e in grammars() if "/" not in e.name)
         raise InputError(f"no bundled grammar {name!r} (bundled: {known}; "
                          "`treebake list` shows all)")

@@ -441,12 +441,11 @@ def _grammar_file(r: _Reader, value: str, key: str, base: Path) -> Path:
     path = base / value
     if path.is_file():
         return path
-    name = Path(value.removeprefix(library.GRAMMAR_PREFIX))
-    bundled = library.grammars_folder() / f"{name}.lsys"
-    # a name inside the bundle only: not a path out of it ("..", absolute)
-    if (value.startswith(library.GRAMMAR_PREFIX) or not name.suffix) \
-            and not name.is_absolute() and ".." not in name.parts and bundled.is_file():
-        return bundled
+    if value.startswith(library.GRAMMAR_PREFIX) or not Path(value).suffix:
+        try:
+            return library.grammar_path(value.removeprefix(library.GRAMMAR_PREFIX))
+        except InputError:
+            pass
     raise r.fail(key, f"file not found: {path} (nor a bundled grammar of that name: "
                       "`treebake list` shows them)")
 

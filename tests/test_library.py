@@ -50,6 +50,8 @@ def test_names_resolve_files_grammars_then_presets(tmp_path, monkeypatch):
         library.resolve("preset", ("grammar",))
     with pytest.raises(InputError):
         library.grammar_path("../presets/demo")
+    with pytest.raises(InputError):  # an absolute path is not a bundled name
+        library.grammar_path(str(library.grammars_folder() / "oak"))
 
 
 def test_list_command(capsys):
