@@ -76,80 +76,42 @@ class JointSpace:
         self.parent = parent
         depth = depths(parent)
         anc = ancestor_table(parent, depth)
-        # subtree moments of every bone (itself and all it carries)
-        sums = self.sums = ChainSums(layout.chain_bones, layout.chain_parent,
-                                     layout.chain_depth, nb)
-        m, c = bones.mass, bones.com0
-        s0 = sums.suffix(m[None, :])[0]
-        s1 = sums.suffix((m[:, None] * c).T).T
-        s2 = sums.suffix((m[:, None, None] * c[:, :, None] * c[:, None, :]).reshape(nb, 9).T
-                         ).T.reshape(nb, 3, 3)
-        si = sums.suffix(bones.inertia.reshape(nb, 9).T).T.reshape(nb, 3, 3)
-        p = bones.pivot0[dof_bone]
-        lever = s1[dof_bone] - s0[dof_bone][:, None] * p  # sum m (c - p_j) over a dof's subtree
+        self.sums = ChainSums(layout.chain_bones, layout.chain_parent, layout.chain_depth, nb)
         # every (upstream i, downstream j) pair, root-aligned: i = anc[j, t]
         jj, tt = np.nonzero(np.arange(anc.shape[1])[None, :] < depth[:, None])
-        ii = anc[jj, tt]
-
-        def mass_entry(i, j):
-            bj = dof_bone[j]
-            pi, pj, ni, nj = p[i], p[j], self.axis[i], self.axis[j]
-            scal = (np.trace(s2[bj], axis1=1, axis2=2) - (s1[bj] * (pi + pj)).sum(1)
-                    + s0[bj] * (pi * pj).sum(1))
-            outer = (s2[bj] - s1[bj][:, :, None] * pi[:, None, :]
-                     - pj[:, :, None] * s1[bj][:, None, :]
-                     + s0[bj][:, None, None] * pj[:, :, None] * pi[:, None, :])
-            return ((ni * nj).sum(1) * scal - np.einsum("ni,nij,nj->n", ni, outer, nj)
-                    + np.einsum("ni,nij,nj->n", ni, si[bj], nj))
-
-        def gravity_entry(i, j):
-            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j)), n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
-            ni, nj, r = self.axis[i], self.axis[j], lever[j]
-            return -((nj @ gravity) * (ni * r).sum(1) - (r @ gravity) * (ni * nj).sum(1))
-
-        every = np.arange(n)
-        m_diag, m_low = mass_entry(every, every), mass_entry(ii, jj)
-        self.k_spring = np.repeat(bones.k, 2)
-        k_diag = self.k_spring + gravity_entry(every, every)
-        k_low = gravity_entry(ii, jj)
-        # structural damping: each limb's block of M times its alpha
-        limb = layout.bone_chain[dof_bone]
-        self.alpha = alpha = bones.alpha[dof_bone]
-        c_diag = alpha * m_diag
-        c_low = np.where(limb[ii] == limb[jj], alpha[jj] * m_low, 0.0)
-        self.tau_g0 = (self.axis * cross(lever, np.broadcast_to(gravity, lever.shape))).sum(1)
-        self.hold = self.tau_g0.copy() if hold is None else hold
-        self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
-
         self._shape = (anc.shape, jj, tt)
+        self._pairs = (anc[jj, tt], jj)
+        self.k_spring = np.repeat(bones.k, 2)
+        limb = layout.bone_chain[dof_bone]
+        self._same_limb = limb[self._pairs[0]] == limb[self._pairs[1]]
+        self.alpha = bones.alpha[dof_bone]
+        self.gravity = np.asarray(gravity, dtype=float)
         # the solve runs chain by chain: a bone chain's dofs, in order
         self._chains = [np.stack([2 * b, 2 * b + 1], 1).ravel() for b in layout.chain_bones]
-        self._factors: dict[tuple[float, float], TreeFactor] = {}
-        self.factor = self.factor_for(c1, c2)
-        self.mass_factor = self.factor_for(0.0, 0.0)
+        self._steps = (c1, c2)
+        # the prestress: gravity's torques on the grown shape
+        m, c = bones.mass, bones.com0
+        s0 = self.sums.suffix(m[None, :])[0]
+        s1 = self.sums.suffix((m[:, None] * c).T).T
+        lever = s1[dof_bone] - s0[dof_bone][:, None] * bones.pivot0[dof_bone]
+        self.tau_g0 = (self.axis * cross(lever, np.broadcast_to(self.gravity, lever.shape))).sum(1)
+        self.hold = self.tau_g0.copy() if hold is None else hold
+        self._s0 = s0
+        # next bone along each bone's chain (-1: its last)
+        nxt = np.full(nb, -1, dtype=np.int64)
+        for cb in layout.chain_bones:
+            nxt[cb[:-1]] = cb[1:]
+        self._next = nxt
         # constants of the products (tree sums, no matrix is formed), as rows
         # (structure of arrays): bone b's entries in column b
         h = bones.hinges
-        cp = cross(self.axis, p).reshape(nb, 2, 3)
+        cp = cross(self.axis, bones.pivot0[dof_bone]).reshape(nb, 2, 3)
         self.n0, self.n1 = h[:, 0].T.copy(), h[:, 1].T.copy()  # hinge axes (3, B)
         self.cp0, self.cp1 = cp[:, 0].T.copy(), cp[:, 1].T.copy()  # n x p
         self.second_turn = cross(h[:, 0], h[:, 1]).T.copy()  # d(hinge 1)/dq_0
         has = bones.parent >= 0
         self.arm = (bones.pivot0 - np.where(has[:, None], bones.pivot0[np.maximum(
             bones.parent, 0)], 0.0)).T.copy()  # pivot from its parent's pivot, at rest
-        # damping: a bone's own mass plus the side chains hanging on it (its
-        # subtree without the rest of its chain), moved by its limb alone
-        nxt = np.full(nb, -1, dtype=np.int64)
-        for cb in layout.chain_bones:
-            nxt[cb[:-1]] = cb[1:]
-        more = nxt >= 0
-        nx = np.maximum(nxt, 0)
-        l0 = s0 - np.where(more, s0[nx], 0.0)
-        l1 = s1 - np.where(more[:, None], s1[nx], 0.0)
-        l2 = s2 - np.where(more[:, None, None], s2[nx], 0.0)
-        li = si - np.where(more[:, None, None], si[nx], 0.0)
-        spin = np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3) - l2 + li
-        self.lump = (l0, l1.T.copy(), spin.transpose(1, 2, 0).copy())
         axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
         self.axis0 = axis0.T.copy()
         self.com_arm = (bones.com0 - bones.pivot0).T.copy()
@@ -160,6 +122,92 @@ class JointSpace:
         self.parent_or_self = np.where(has, bones.parent, np.arange(nb))
         fr = layout.bone_frame
         self.frame_row = np.where(fr >= 0, fr, nb)  # the frame bone's column, nb: the world
+        self.q_at, self.turn_at = np.zeros(n), np.zeros((3, nb))  # the pose linearised at
+        self._linearise(bones.pivot0, bones.com0, bones.inertia, bones.hinges)
+
+    def linearise_at(self, q: np.ndarray) -> None:
+        """Take M, C, K_g and the rates' Jacobian at the pose of hinge angles
+        `q` (2B,) rad instead of the grown shape's (the equations'
+        coordinates, springs and prestress stay the grown shape's)."""
+        kin = self.kinematics(q, np.zeros(self.n))
+        pose = self.pose(kin, q)
+        rot = pose.rot.transpose(2, 0, 1)
+        inertia = rot @ self.bones.inertia @ rot.transpose(0, 2, 1)
+        hinges = np.stack([pose.first.T, pose.second.T], 1)
+        self.q_at, self.turn_at = q.copy(), kin[0:3].copy()
+        self._linearise(pose.pivot.T, pose.com.T, inertia, hinges)
+
+    def _linearise(self, pivot: np.ndarray, com: np.ndarray, inertia: np.ndarray,
+                   hinges: np.ndarray) -> None:
+        """M, C, K_g and the rates' Jacobian for bones at pivots, COMs (B, 3)
+        m, inertia (B, 3, 3) kg m^2 and hinge axes (B, 2, 3)."""
+        nb, dof_bone = self.bones.n, self.dof_bone
+        m, sums = self.bones.mass, self.sums
+        # subtree moments of every bone (itself and all it carries)
+        s0 = self._s0
+        s1 = sums.suffix((m[:, None] * com).T).T
+        s2 = sums.suffix((m[:, None, None] * com[:, :, None] * com[:, None, :]).reshape(nb, 9).T
+                         ).T.reshape(nb, 3, 3)
+        si = sums.suffix(inertia.reshape(nb, 9).T).T.reshape(nb, 3, 3)
+        axis = hinges.reshape(self.n, 3)
+        p = pivot[dof_bone]
+        lever = s1[dof_bone] - s0[dof_bone][:, None] * p  # sum m (c - p_j) over a dof's subtree
+        gravity = self.gravity
+        ii, jj = self._pairs
+
+        # M_ij = sum over the bodies both hinges move of m (n_i x (c - p_i)) .
+        # (n_j x (c - p_j)) + n_i I n_j, in the subtree moments s0, s1, s2, si
+        # of j's bone, expanded into dot products (no 3 x 3 per pair)
+        s0j, s1j = s0[dof_bone], s1[dof_bone]
+        tr2 = np.trace(s2, axis1=1, axis2=2)[dof_bone]
+        # (s2 - si) n_j and s1 . n_j per dof j
+        s2n = np.einsum("nij,nj->ni", s2[dof_bone] - si[dof_bone], axis)
+        s1n = (s1j * axis).sum(1)
+
+        def mass_entry(i, j):
+            pi, pj, ni, nj = p[i], p[j], axis[i], axis[j]
+            scal = tr2[j] - (s1j[j] * (pi + pj)).sum(1) + s0j[j] * (pi * pj).sum(1)
+            ni_pj, pi_nj = (ni * pj).sum(1), (pi * nj).sum(1)
+            return ((ni * nj).sum(1) * scal - (ni * s2n[j]).sum(1)
+                    + (ni * s1j[j]).sum(1) * pi_nj + ni_pj * s1n[j] - s0j[j] * ni_pj * pi_nj)
+
+        def gravity_entry(i, j):
+            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j)), n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
+            ni, nj, r = axis[i], axis[j], lever[j]
+            return -((nj @ gravity) * (ni * r).sum(1) - (r @ gravity) * (ni * nj).sum(1))
+
+        every = np.arange(self.n)
+        m_diag, m_low = mass_entry(every, every), mass_entry(ii, jj)
+        k_diag = self.k_spring + gravity_entry(every, every)
+        k_low = gravity_entry(ii, jj)
+        # structural damping: each limb's block of M times its alpha
+        alpha = self.alpha
+        c_diag = alpha * m_diag
+        c_low = np.where(self._same_limb, alpha[jj] * m_low, 0.0)
+        self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
+        self._factors: dict[tuple[float, float], TreeFactor] = {}
+        self.factor = self.factor_for(*self._steps)
+        # the rates' Jacobian: hinge axes and n x p at this pose, and COMs
+        cp = cross(axis, p).reshape(nb, 2, 3)
+        self.rate_n0, self.rate_n1 = hinges[:, 0].T.copy(), hinges[:, 1].T.copy()
+        self.rate_cp0, self.rate_cp1 = cp[:, 0].T.copy(), cp[:, 1].T.copy()
+        self.rate_com = com.T.copy()
+        # damping: a bone's own mass plus the side chains hanging on it (its
+        # subtree without the rest of its chain), moved by its limb alone
+        nxt = self._next
+        more = nxt >= 0
+        nx = np.maximum(nxt, 0)
+        l0 = s0 - np.where(more, s0[nx], 0.0)
+        l1 = s1 - np.where(more[:, None], s1[nx], 0.0)
+        l2 = s2 - np.where(more[:, None, None], s2[nx], 0.0)
+        li = si - np.where(more[:, None, None], si[nx], 0.0)
+        spin = np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3) - l2 + li
+        self.lump = (l0, l1.T.copy(), spin.transpose(1, 2, 0).copy())
+
+    @property
+    def mass_factor(self) -> TreeFactor:
+        """The factored M (for accelerations from forces)."""
+        return self.factor_for(0.0, 0.0)
 
     def factor_for(self, c1: float, c2: float) -> TreeFactor:
         """The factored M + c1 C + c2 K (cached)."""
@@ -195,8 +243,8 @@ class JointSpace:
         own = np.empty((12, self.bones.n))
         own[0:3] = q0 * self.n0 + q1 * self.n1
         own[3:6] = q0 * self.cp0 + q1 * self.cp1
-        own[6:9] = v0 * self.n0 + v1 * self.n1
-        own[9:12] = v0 * self.cp0 + v1 * self.cp1
+        own[6:9] = v0 * self.rate_n0 + v1 * self.rate_n1
+        own[9:12] = v0 * self.rate_cp0 + v1 * self.rate_cp1
         return self.sums.prefix(own)
 
     def tip_shift(self, dq: np.ndarray) -> np.ndarray:
@@ -219,7 +267,7 @@ class JointSpace:
         frame[:, :, self.roots] = np.eye(3)[:, :, None]
         pivot = self.sums.prefix(turn_rows(frame, self.arm))
         com = pivot + turn_rows(rot, self.com_arm)
-        vcom = cross_rows(kin[6:9], self.com0) - kin[9:12]
+        vcom = cross_rows(kin[6:9], self.rate_com) - kin[9:12]
         if not loads:
             return Pose(rot, pivot, com, vcom, None, None, None)
         first = turn_rows(frame, self.n0)
@@ -254,8 +302,8 @@ class JointSpace:
         per_bone[3:6] = cross_rows(w, l1) - l0 * lin
         sub = self.sums.chain_suffix(per_bone)
         out = np.empty(self.n)
-        out[0::2] = (self.n0 * sub[0:3]).sum(0) - (self.cp0 * sub[3:6]).sum(0)
-        out[1::2] = (self.n1 * sub[0:3]).sum(0) - (self.cp1 * sub[3:6]).sum(0)
+        out[0::2] = (self.rate_n0 * sub[0:3]).sum(0) - (self.rate_cp0 * sub[3:6]).sum(0)
+        out[1::2] = (self.rate_n1 * sub[0:3]).sum(0) - (self.rate_cp1 * sub[3:6]).sum(0)
         return out
 
     def energy(self, kin: np.ndarray, pose: Pose, q: np.ndarray, g: float) -> np.ndarray:

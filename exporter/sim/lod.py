@@ -443,6 +443,7 @@ class PlanarLOD:
         stats["max_joint_gap"] = float(f"{st.max_joint_gap:.3g}")
         stats["linear_steps"] = sum(s.steps for s in lin)
         stats["linear_rebuilds"] = sum(s.rebuilds for s in lin)
+        stats["linear_relinearised"] = sum(s.relinearised for s in lin)
         stats["linear_limited"] = sum(s.limited for s in lin)
         stats["linear_split"] = sum(s.split for s in lin)
         stats["linear_parts"] = max((s.parts for s in lin), default=1)
