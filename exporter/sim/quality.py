@@ -63,6 +63,6 @@ QUALITIES = {
     # conserved energy on every felled species where the pymunk tier's one-way
     # coupling made 2.3 % of a sapling's (docs/physics.md), in 0.2-1.1x its time
     # (3.2-3.7x on the willow, whose 1,328 broken parts are free bodies in contact)
-    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.2,
+    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.3,
                      reference_step=1 / 1000, cut_engine="nonlinear"),
 }
