@@ -10,7 +10,9 @@ tier's bones (its pulse and the capped push after it, SceneLoads), steps are
 split (BLAST_SPLIT): the pulse lasts milliseconds. After every step its
 local error is estimated at every bone's tip; past ERROR_TOLERANCE of the
 tree's height, the steps are split from then on (the willow's twigs in
-gusts, whose explicit wind moments ring at 1/30 s).
+gusts, whose explicit wind moments ring at 1/30 s). Once a bone has turned
+the quality's `relinearise` from the pose the system was linearised at, it
+is linearised again at the current pose (JointSpace.linearise_at).
 
 A tree leaves this tier for the pymunk tier (chains/, with its pose and
 spin, `HandOff`) the step it leaves the linear range: a hinge past half its
