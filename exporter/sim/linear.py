@@ -291,7 +291,7 @@ class LinearTier:
         self._state = None
         # the step's acceleration stays the next predictor's: solving for it
         # again with the new mass matrix costs a second factorisation and
-        # moved the bamboo's error in gusts by 1 % of itself (0.0770 -> 0.0777)
+        # moved the bamboo's error in gusts by 1 % of itself (0.0770 -> 0.0777 at 0.3 rad)
         self.stats.relinearised += 1
         self.stats.build_seconds += time.perf_counter() - t0
 
