@@ -1,7 +1,8 @@
 """Every quality level against the Euler-Bernoulli cantilever: the first
 frequency of a stem of N segments must approach the beam's as N grows, for
 green wood and for wood 10^4 times stiffer (an independent, analytic truth);
-and the default level's steps against the same model at a converged step."""
+the default level's steps against the same model at a converged step; and
+the bamboo, bent 0.8 rad by gusts, against the every-segment truth."""
 
 import math
 from dataclasses import replace
