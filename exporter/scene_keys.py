@@ -195,8 +195,9 @@ QUALITY = table(
     Key("linear_rate", "the linear tier's implicit steps (finer for a stiff tree, split "
         "during blasts)", "Hz", None, 1.0, 10_000.0, doc_default=_levels("linear_rate")),
     Key("relinearise", "the linear tier takes its mass matrix, damping, gravity's stiffness "
-        "and the rates' lever arms again at the current pose once a bone has turned this "
-        "far from the pose they were taken at", "rad", None, 0.01, 10.0,
+        "and the rates' lever arms again at the trees' mean pose (over about 0.5 s) once a "
+        "bone of it has turned this far from the pose they were taken at", "rad", None, 0.01,
+        10.0,
         doc_default=_levels("relinearise")),
     Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
         "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "

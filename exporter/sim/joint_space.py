@@ -21,10 +21,10 @@ deflection at 0.13 rad, measured against the reference), with bone
 rotations exp(sum of the hinge rotation vectors below them), exact for
 bending in one plane. M, C, gravity's stiffness K_g and the Jacobian that
 gives the bones' velocities from the hinge rates are taken at one pose:
-the grown shape, then the pose a tree has turned to (`linearise_at`, when
-the linear tier asks: a bamboo culm bent 0.8 rad by gusts had its error
-against the reference at 0.117 % of its height with them at rest, 0.084 %
-taken again every 0.5 rad of turn).
+the grown shape, then the mean pose a tree has turned to (`linearise_at`,
+when the linear tier asks: a bamboo culm bent 0.8 rad by gusts had its
+error against the reference at 0.117 % of its height with them at rest,
+0.086 % taken again every 0.25 rad of its mean pose's turn).
 
 Implicit steps need the tangent of the right-hand side: K_s plus K_g,
 gravity's geometric stiffness (a hanging twig's pendulum
@@ -139,7 +139,7 @@ class JointSpace:
         rot = pose.rot.transpose(2, 0, 1)
         inertia = rot @ self.bones.inertia @ rot.transpose(0, 2, 1)
         hinges = np.stack([pose.first.T, pose.second.T], 1)
-        self.q_at, self.turn_at = q.copy(), kin[0:3].copy()
+        self.q_at, self.turn_at = q.copy(), self.turns(q)
         self._linearise(pose.pivot.T, pose.com.T, inertia, hinges)
 
     def _linearise(self, pivot: np.ndarray, com: np.ndarray, inertia: np.ndarray,
@@ -251,6 +251,11 @@ class JointSpace:
         own[6:9] = v0 * self.rate_n0 + v1 * self.rate_n1
         own[9:12] = v0 * self.rate_cp0 + v1 * self.rate_cp1
         return self.sums.prefix(own)
+
+    def turns(self, q: np.ndarray) -> np.ndarray:
+        """Each bone's rotation vector (3, B) rad from the grown shape at
+        hinge angles `q`: the first rows of `kinematics`."""
+        return self.sums.prefix(q[0::2] * self.n0 + q[1::2] * self.n1)
 
     def tip_shift(self, dq: np.ndarray) -> np.ndarray:
         """How far (3, B) m each bone's tip moves, to first order about the

@@ -30,8 +30,8 @@ class Quality:
     joint_correction: float = 0.02
     coupling: str = "apparent"  # "apparent": children's apparent mass; "rigid": plain lumping
     linear_rate: float = 48.0  # Hz, the linear tier's implicit steps
-    relinearise: float = 0.5  # rad: the linear tier takes its matrices again at the pose
-    # once a bone has turned this far from the pose they were taken at
+    relinearise: float = 0.25  # rad: the linear tier takes its matrices again at the
+    # trees' mean pose once a bone of it has turned this far from the pose they were taken at
     tier: str = "auto"  # "auto": linear, nonlinear engine when needed; "pymunk": pymunk only
     nonlinear: str = "auto"  # trees that leave the linear range: "reference" (MuJoCo,
     # when installed: "auto") or "pymunk"
@@ -63,6 +63,6 @@ QUALITIES = {
     # conserved energy on every felled species where the pymunk tier's one-way
     # coupling made 2.3 % of a sapling's (docs/physics.md), in 0.2-1.1x its time
     # (3.2-3.7x on the willow, whose 1,328 broken parts are free bodies in contact)
-    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.3,
+    "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.2,
                      reference_step=1 / 1000, cut_engine="nonlinear"),
 }
