@@ -197,8 +197,7 @@ QUALITY = table(
     Key("relinearise", "the linear tier takes its mass matrix, damping, gravity's stiffness "
         "and the rates' lever arms again at the trees' mean pose (over about 0.5 s) once a "
         "bone of it has turned this far from the pose they were taken at", "rad", None, 0.01,
-        10.0,
-        doc_default=_levels("relinearise")),
+        10.0, doc_default=_levels("relinearise")),
     Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
         "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
         "installed, else pymunk; ground contact always pymunk, a cut as `cut_engine` says), "
