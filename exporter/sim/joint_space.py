@@ -120,14 +120,13 @@ class JointSpace:
         axis0 = (bones.tip0 - bones.pivot0) / np.maximum(bones.length, 1e-12)[:, None]
         self.axis0 = axis0.T.copy()
         self.com_arm = (bones.com0 - bones.pivot0).T.copy()
-        self.com0 = bones.com0.T.copy()
         self.tip0 = bones.tip0.T.copy()
         self.inertia = bones.inertia.transpose(1, 2, 0).copy()  # (3, 3, B)
         self.roots = np.nonzero(~has)[0]
         self.parent_or_self = np.where(has, bones.parent, np.arange(nb))
         fr = layout.bone_frame
         self.frame_row = np.where(fr >= 0, fr, nb)  # the frame bone's column, nb: the world
-        self.q_at, self.turn_at = np.zeros(n), np.zeros((3, nb))  # the pose linearised at
+        self.turn_at = np.zeros((3, nb))  # the bones' rotation vectors where linearised
         self._linearise(bones.pivot0, bones.com0, bones.inertia, bones.hinges)
 
     def linearise_at(self, q: np.ndarray) -> None:
@@ -139,7 +138,7 @@ class JointSpace:
         rot = pose.rot.transpose(2, 0, 1)
         inertia = rot @ self.bones.inertia @ rot.transpose(0, 2, 1)
         hinges = np.stack([pose.first.T, pose.second.T], 1)
-        self.q_at, self.turn_at = q.copy(), self.turns(q)
+        self.turn_at = self.turns(q)
         self._linearise(pose.pivot.T, pose.com.T, inertia, hinges)
 
     def _linearise(self, pivot: np.ndarray, com: np.ndarray, inertia: np.ndarray,

@@ -297,7 +297,7 @@ class LinearTier:
         if (turn * turn).sum(0).max() <= self.quality.relinearise**2:
             return
         t0 = time.perf_counter()
-        self.model.linearise_at(self.q_mean.copy())
+        self.model.linearise_at(self.q_mean)
         self._state = None
         # the step's acceleration stays the next predictor's: solving for it
         # again with the new mass matrix costs a second factorisation and
