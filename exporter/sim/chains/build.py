@@ -321,6 +321,12 @@ class ChainBuild:
             self.body_mass[i] = total
             body.mass = float(total)
             body.moment = float(self.i_eff[i])
-            origin = body.position  # setting the COG moves the origin: restore it
+            # setting the COG moves the origin: restore it. pymunk's velocity
+            # is the COG's, so the new COG's must be what the wood there had
+            # (v + omega x shift), or the break would jolt what stays
+            origin, before = body.position, body.local_to_world(body.center_of_gravity)
             body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
             body.position = origin
+            shift = body.local_to_world(body.center_of_gravity) - before
+            w = body.angular_velocity
+            body.velocity += (-w * shift.y, w * shift.x)

@@ -1,0 +1,51 @@
+"""The pymunk tier's bookkeeping at events, checked on its bodies directly."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from treebake.pipeline import grow, prepare
+from treebake.scene import parse_scene
+from treebake.sim.chains import PymunkTier
+from treebake.sim.loads import SceneLoads
+from treebake.sim.quality import QUALITIES
+
+# a stem of four segments with a heavy side branch on its second
+GRAMMAR = ("density: 800\nmodulus: 8e9\ndamping: 0.05\n"
+           "axiom: !(0.2)F(1)F(1)[&(60)!(0.12)F(1.2)F(1)]F(1)F(1)\n")
+
+
+def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tmp_path):
+    """When a branch breaks off, the bodies that carried it lose its mass
+    and their centres of gravity move within them. A body's wood must go on
+    moving as before (a break releases no momentum into what stays): pymunk
+    keeps a body's velocity at its centre of gravity, so that velocity must
+    change by omega x the shift. Checked at every remaining body's pivot and
+    tip, spinning at 3 rad/s."""
+    path = tmp_path / "g.lsys"
+    path.write_text(GRAMMAR)
+    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
+                         "wind": {"speed": 5.0}},
+                        file="<test>")
+    grown = grow(scene)
+    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
+    trees, _, _, _ = prepare(scene, grown, loads, QUALITIES["default"])
+    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
+    tier.begin()
+    branch = int(np.nonzero(tier.bone_frame >= 0)[0][0])  # the side chain's first bone
+    stays = [i for i in range(len(tier.bodies)) if tier.bone_frame[tier.body_bone[i]] < 0]
+    for i, body in enumerate(tier.bodies):
+        body.angular_velocity = 3.0
+        body.velocity = (0.5 + 0.1 * i, -0.2)
+    points = {i: [tier.bodies[i].local_to_world(p) for p in
+                  ((0.0, 0.0), tuple(tier.bodies[i].center_of_gravity * 2))] for i in stays}
+    before = {i: [tier.bodies[i].velocity_at_world_point(p) for p in points[i]] for i in stays}
+    cog_before = {i: tier.bodies[i].center_of_gravity for i in stays}
+    tier.read()
+    tier.break_joint(branch, 0.0, tier.reconstruct(), "test")
+    moved = [i for i in stays if (tier.bodies[i].center_of_gravity - cog_before[i]).length > 1e-3]
+    assert moved, "no body that carried the branch changed its centre of gravity"
+    for i in stays:
+        after = [tier.bodies[i].velocity_at_world_point(p) for p in points[i]]
+        for a, b in zip(after, before[i]):
+            assert (a - b).length < 1e-9, (i, a, b)
