@@ -29,10 +29,10 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..scene import Scene
+from . import chains  # chains.PymunkTier loads pymunk when a tree first needs it
 from . import quality as quality_levels
-from .chains import PymunkTier, Stats
+from .chains import StartState, Stats
 from .chains.forces import MAX_REFINE
-from .chains.tier import StartState
 from .common import SimTree, TreeMotion, cap_note
 from .debris import MAX_SPIN
 from .events import TIER, Event
@@ -128,22 +128,22 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     lin_idx = [i for i, p in enumerate(in_nonlinear) if not p]
     lin = LinearTier([trees[i] for i in lin_idx], scene, quality, loads, substeps, log) \
         if lin_idx else None
-    pym: list[tuple[PymunkTier, list[int]]] = []
+    pym: list[tuple[chains.PymunkTier, list[int]]] = []
     # (trees, start s, (q, v) or None, the HandOff or None, work done before, J)
     ref_runs: list[tuple] = []
     first = [i for i, p in enumerate(in_nonlinear) if p]
     if first and engine_for("projectile") == "pymunk":
-        tier = PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
+        tier = chains.PymunkTier([trees[i] for i in first], scene, quality, loads, log=log)
         tier.begin()
         pym.append((tier, first))
     elif first:
         ref_runs.append((first, 0.0, None, None, 0.0))
     uses = [TierUse(engine_for("projectile") if p else "linear") for p in in_nonlinear]
 
-    def pymunk_from(group: list[tuple[int, HandOff]]) -> tuple[PymunkTier, list[int]]:
+    def pymunk_from(group: list[tuple[int, HandOff]]) -> tuple[chains.PymunkTier, list[int]]:
         """A pymunk tier for trees handed over at one substep."""
         members = [i for i, _ in group]
-        tier = PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
+        tier = chains.PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
         tier.begin(group[0][1].substep,
                    StartState(np.concatenate([ho.rot for _, ho in group]),
                               np.concatenate([ho.omega for _, ho in group])))
@@ -214,7 +214,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
 
     returns: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (tree, frame, q, v)
 
-    def take_pymunk(tier: PymunkTier, members: list[int], works: list[float]) -> None:
+    def take_pymunk(tier: chains.PymunkTier, members: list[int], works: list[float]) -> None:
         """A pymunk tier's frames for its trees; those it gave back queued."""
         start = tier.first_frame + (1 if tier.substep_start % tier.spf else 0)
         for i, m, w in zip(members, tier.motions(), works):
@@ -291,7 +291,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             # trees from the hand-over (or from the start: trees a projectile reaches)
             log(f"{', '.join(trees[i].name for i in members)}: the reference failed ({exc}); "
                 "the pymunk tier takes over")
-            tier = PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
+            tier = chains.PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
             if ho is None:
                 tier.begin()
             else:
