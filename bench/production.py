@@ -6,7 +6,11 @@ its own process (`--workers 1`), in one run:
 
 - cost: CPU seconds of the whole process (what `/usr/bin/time` reports:
   start-up, growing, rigging, simulating, saving) and of the simulation
-  alone (the bake's own timing);
+  alone (the bake's own timing); and the process's fixed cost, what it
+  spends not simulating (the interpreter and numpy starting, the package's
+  imports, the scene, growing and rigging, saving): the least a setting
+  could cost with a solver that took no time, printed against the
+  reference at 1/240 s;
 - error: every segment's end over every frame against the truth — the MuJoCo
   reference with one bone per segment (`--quality final`) at 1/2000 s — as %
   of the tree's height: RMS and max, the median over trees for a forest.
@@ -25,12 +29,12 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
 import resource
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -95,10 +99,18 @@ def job_scene(job: str, folder: Path):
 
 
 def run_one(job: str, setting: str, out: Path) -> dict:
-    """Bake one job with one setting in this process; save the bake to `out`."""
+    """Bake one job with one setting in this process; save the bake to `out`.
+    Also where the process's CPU time went: start-up (the interpreter and
+    numpy), the package's imports, the scene, the bake, the save."""
+    started = time.process_time()  # the interpreter and this script's imports (numpy)
     from treebake.bake import save_bake
     from treebake.pipeline import bake_scene
     from treebake.sim.quality import QUALITIES
+    if setting.startswith("lod") or setting == "pymunk":
+        from treebake.sim import lod  # noqa: F401 (imported by the bake: counted here)
+    else:
+        from treebake.sim import reference  # noqa: F401
+    imported = time.process_time()
 
     kw = dict(SETTINGS[setting])
     level = kw["quality"]
@@ -108,13 +120,20 @@ def run_one(job: str, setting: str, out: Path) -> dict:
     cpu0 = time.process_time()
     bake = bake_scene(scene, workers=1, **kw)
     cpu = time.process_time() - cpu0
+    cpu1 = time.process_time()
     save_bake(bake, out)
+    saved = time.process_time() - cpu1
     t = bake.timing
     solvers: dict[str, int] = {}
     for tb in bake.trees:
         key = tb.info.get("solver", "static").split(" at ")[0]
         solvers[key] = solvers.get(key, 0) + 1
-    return {"bake_cpu_seconds": round(cpu, 3),
+    return {"startup_cpu_seconds": round(started, 3),
+            "import_cpu_seconds": round(imported - started, 3),
+            "scene_cpu_seconds": round(cpu0 - imported, 3),
+            "grow_seconds": t.get("grow_seconds", 0.0),  # growing and rigging (wall: one process)
+            "save_cpu_seconds": round(saved, 3),
+            "bake_cpu_seconds": round(cpu, 3),
             "solver_seconds": round(sum(t.get(k, 0.0) for k in (
                 "step_seconds", "update_seconds", "build_seconds", "compile_seconds")), 3),
             "solvers": solvers, "notes": bake.meta.get("notes", [])}
@@ -157,6 +176,31 @@ def tree_errors(a, truth) -> tuple[list[float], list[float]]:
     return rms, mx
 
 
+def fixed_cost(row: dict) -> float:
+    """CPU s of a process that is not simulating: start-up, imports, the
+    scene, growing and rigging, saving."""
+    return round(sum(row[k] for k in ("startup_cpu_seconds", "import_cpu_seconds",
+                                       "scene_cpu_seconds", "grow_seconds",
+                                       "save_cpu_seconds")), 3)
+
+
+def floor(job: str, rows: list[dict]) -> None:
+    """Print each LOD setting's cost against the reference at 1/240 s, and
+    the least it could reach with a solver that cost nothing (its fixed
+    cost alone)."""
+    ref = next((r for r in rows if r["setting"] == "ref240"), None)
+    if ref is None:
+        return
+    for r in rows:
+        if r["setting"].startswith("lod") or r["setting"] == "pymunk":
+            print(f"  {job} {r['setting']}: {r['process_cpu_seconds'] / ref['process_cpu_seconds']:.2f}x "
+                  f"ref240's process CPU; with a free solver "
+                  f"{r['fixed_cpu_seconds'] / ref['process_cpu_seconds']:.2f}x "
+                  f"(start-up {r['startup_cpu_seconds']:.2f}, imports {r['import_cpu_seconds']:.2f}, "
+                  f"growing {r['grow_seconds']:.2f}, saving {r['save_cpu_seconds']:.2f} s)",
+                  flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", nargs="*", default=list(JOBS), choices=list(JOBS))
@@ -171,7 +215,7 @@ def main() -> None:
     from treebake.bake import load_bake
 
     rows = []
-    print(f"{'job':<9} {'setting':<13} {'process CPU s':>13} {'bake CPU s':>10} "
+    print(f"{'job':<9} {'setting':<13} {'process CPU s':>13} {'fixed s':>7} {'bake CPU s':>10} "
           f"{'solver s':>8} {'RMS %':>8} {'max %':>8}  tiers", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -188,9 +232,12 @@ def main() -> None:
                          worst_max_pct=round(max(mx), 5) if mx else 0.0)
                 r.pop("path")
                 rows.append(r)
+                r["fixed_cpu_seconds"] = fixed_cost(r)
                 print(f"{job:<9} {setting:<13} {r['process_cpu_seconds']:>13.2f} "
+                      f"{r['fixed_cpu_seconds']:>7.2f} "
                       f"{r['bake_cpu_seconds']:>10.2f} {r['solver_seconds']:>8.2f} "
                       f"{r['rms_pct']:>8.4f} {r['max_pct']:>8.3f}  {r['solvers']}", flush=True)
+            floor(job, [r for r in rows if r["job"] == job])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "production.json").write_text(json.dumps({"rows": rows}, indent=2) + "\n")
