@@ -190,7 +190,6 @@ class JointSpace:
         c_low = np.where(self._same_limb, alpha[jj] * m_low, 0.0)
         self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
         self._factors: dict[tuple[float, float], TreeFactor] = {}
-        self.factor = self.factor_for(*self._steps)
         # the rates' Jacobian: hinge axes and n x p at this pose, and COMs
         cp = cross(axis, p).reshape(nb, 2, 3)
         self.rate_n0, self.rate_n1 = hinges[:, 0].T.copy(), hinges[:, 1].T.copy()
@@ -207,6 +206,12 @@ class JointSpace:
         li = si - np.where(more[:, None, None], si[nx], 0.0)
         spin = np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3) - l2 + li
         self.lump = (l0, l1.T.copy(), spin.transpose(1, 2, 0).copy())
+
+    @property
+    def factor(self) -> TreeFactor:
+        """The factored M + c1 C + c2 K of the tier's whole step (built when
+        first asked: while its steps are split, only the parts' is)."""
+        return self.factor_for(*self._steps)
 
     @property
     def mass_factor(self) -> TreeFactor:
