@@ -238,8 +238,8 @@ def main() -> None:
                          worst_rms_pct=round(max(rms), 5) if rms else 0.0,
                          worst_max_pct=round(max(mx), 5) if mx else 0.0)
                 r.pop("path")
-                rows.append(r)
                 r["fixed_cpu_seconds"] = fixed_cost(r)
+                rows.append(r)
                 print(f"{job:<9} {setting:<13} {r['process_cpu_seconds']:>13.2f} "
                       f"{r['fixed_cpu_seconds']:>7.2f} "
                       f"{r['bake_cpu_seconds']:>10.2f} {r['solver_seconds']:>8.2f} "
