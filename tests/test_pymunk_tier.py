@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 
 from treebake.pipeline import grow, prepare
@@ -49,3 +53,24 @@ def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tm
         after = [tier.bodies[i].velocity_at_world_point(p) for p in points[i]]
         for a, b in zip(after, before[i]):
             assert (a - b).length < 1e-9, (i, a, b)
+
+
+def test_a_bake_that_stays_linear_never_loads_pymunk(tmp_path):
+    """The pymunk tier (and pymunk) loads only when a tree leaves the linear
+    tier: a breeze on a small tree is baked in a fresh interpreter, which
+    must finish with every tree linear and pymunk never imported."""
+    path = tmp_path / "g.lsys"
+    path.write_text(GRAMMAR)
+    code = (
+        "import sys, json\n"
+        "from treebake.pipeline import bake_scene\n"
+        "from treebake.scene import parse_scene\n"
+        f"scene = parse_scene({{'tree': [{{'grammar': {str(path)!r}}}], 'duration': 1.0,\n"
+        "                      'wind': {'speed': 5.0}}, file='<test>')\n"
+        "bake = bake_scene(scene, solver='planar')\n"
+        "print(json.dumps([[t.info.get('solver') for t in bake.trees], 'pymunk' in sys.modules]))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    solvers, loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    assert solvers == ["linear"]
+    assert not loaded
