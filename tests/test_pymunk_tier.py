@@ -51,7 +51,7 @@ def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tm
     assert moved, "no body that carried the branch changed its centre of gravity"
     for i in stays:
         after = [tier.bodies[i].velocity_at_world_point(p) for p in points[i]]
-        for a, b in zip(after, before[i]):
+        for a, b in zip(after, before[i], strict=True):
             assert (a - b).length < 1e-9, (i, a, b)
 
 
@@ -68,7 +68,8 @@ def test_a_bake_that_stays_linear_never_loads_pymunk(tmp_path):
         f"scene = parse_scene({{'tree': [{{'grammar': {str(path)!r}}}], 'duration': 1.0,\n"
         "                      'wind': {'speed': 5.0}}, file='<test>')\n"
         "bake = bake_scene(scene, solver='planar')\n"
-        "print(json.dumps([[t.info.get('solver') for t in bake.trees], 'pymunk' in sys.modules]))\n")
+        "solvers = [t.info.get('solver') for t in bake.trees]\n"
+        "print(json.dumps([solvers, 'pymunk' in sys.modules]))\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           check=True)
     solvers, loaded = json.loads(done.stdout.strip().splitlines()[-1])
