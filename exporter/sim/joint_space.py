@@ -138,7 +138,7 @@ class JointSpace:
         rot = pose.rot.transpose(2, 0, 1)
         inertia = rot @ self.bones.inertia @ rot.transpose(0, 2, 1)
         hinges = np.stack([pose.first.T, pose.second.T], 1)
-        self.turn_at = self.turns(q)
+        self.turn_at = kin[0:3].copy()  # the rotation vectors: `turns(q)`, already summed
         self._linearise(pose.pivot.T, pose.com.T, inertia, hinges)
 
     def _linearise(self, pivot: np.ndarray, com: np.ndarray, inertia: np.ndarray,
