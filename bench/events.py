@@ -1,6 +1,6 @@
 """Events on both solvers: does a cut, a hit or a blast create energy?
 
-For each preset (felling, boxes) and the 50 kg blast at 3 m from a sapling,
+For each preset (felling, boxes, explosion) and the 50 kg blast at 3 m from a sapling,
 bake with the planar LOD and with the MuJoCo reference and measure from the
 bakes alone (independent of either solver's bookkeeping):
 
@@ -17,7 +17,7 @@ bakes alone (independent of either solver's bookkeeping):
 - felling: time from the cut to the stem touching the ground, resting
   azimuth of the stem; boxes: the highest point a box reaches after a hit.
 
-    python bench/events.py [--cases felling boxes blast] [--solvers planar full]
+    python bench/events.py [--cases felling boxes explosion blast] [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
                            [--quality final]      # the LOD's level (default: the scene's)
 
@@ -119,6 +119,7 @@ def measure(bake, scene) -> dict:
 CASES = {
     "felling": lambda: load_scene(ROOT / "presets" / "felling.toml"),
     "boxes": lambda: load_scene(ROOT / "presets" / "boxes.toml"),
+    "explosion": lambda: load_scene(ROOT / "presets" / "explosion.toml"),
     "blast": lambda: parse_scene({
         "name": "blast50", "duration": 5.0, "fps": 24.0,
         "tree": [{"grammar": str(ROOT / "grammars" / "sapling.lsys")}],

@@ -259,3 +259,27 @@ def test_a_cut_at_final_goes_to_the_reference_or_says_why_not(tmp_path, root, mo
         assert b.trees[0].info["solver"].startswith(f"linear, then {engine} at 0.500 s")
         missing = [n for n in b.meta["notes"] if "MuJoCo is not installed" in n]
         assert bool(missing) != installed, b.meta["notes"]
+
+
+def test_a_blast_breaks_as_many_twigs_on_the_lod_as_on_the_reference(root):
+    """The `explosion` preset's charge on its sapling (10 kg of TNT 9.2 m
+    away): the reference, at its own step (1/2000 s), breaks 12 joints, all
+    twigs ringing past their strength within 20 ms of the front. The LOD
+    hands the sapling to MuJoCo at its coarse step (1/480 s), whose
+    numerical damping takes a third of critical off a twig's 50 Hz
+    ringing: it broke 8 (7-8 with the charge moved by up to 2 cm). Split to
+    the reference's step while the blast pushes and for BLAST_RING after,
+    it breaks 12 (the issue's bound: within 25 %)."""
+    pytest.importorskip("mujoco")
+    raw = {"duration": 1.5, "fps": 24,
+           "tree": [{"grammar": str(root / "grammars" / "sapling.lsys"),
+                     "position": [9.0, 2.0]}],
+           "explosion": [{"position": [0.0, 0.0, 1.0], "time": 1.0, "charge": 10.0}]}
+    broken = {}
+    for solver in ("planar", "full"):
+        b = bake_scene(parse_scene(raw, file="<blast>"), solver=solver)
+        broken[solver] = sum(e["kind"] == "broke" for e in b.trees[0].info["events"])
+        if solver == "planar":
+            assert any("its twigs rang" in n for n in b.meta["notes"]), b.meta["notes"]
+    assert broken["full"] >= 10, broken  # the case still breaks twigs
+    assert abs(broken["planar"] - broken["full"]) <= 0.25 * broken["full"], broken

@@ -239,7 +239,7 @@ class Bones:
         lo, hi = int(self.offsets[ti]), int(self.offsets[ti + 1])
         part = {f.name: getattr(self, f.name)[lo:hi] for f in fields(self)
                 if f.name not in ("offsets", "props", "pulls", "parent", "bone_tree")}
-        props = BoneProps(*(getattr(self.props, f.name)[lo:hi] for f in fields(BoneProps)))
+        props = self.props.take(slice(lo, hi))
         pulls = [Pull(p.bone - lo, p.force, p.ramp, p.release) for p in self.pulls
                  if lo <= p.bone < hi]
         return Bones(offsets=np.array([0, hi - lo]), props=props, pulls=pulls,

@@ -39,6 +39,11 @@ class BoneProps:
     cd_wood: np.ndarray  # drag coefficient
     cd_leaf: np.ndarray
 
+    def take(self, index) -> BoneProps:
+        """These constants for some of the bones (an index or a mask)."""
+        return BoneProps(self.mass[index], self.wood_area[index], self.leaf_area[index],
+                         self.diameter[index], self.cd_wood[index], self.cd_leaf[index])
+
 
 class SceneLoads:
     """External loads of a scene. `gravity` is always included; prestress

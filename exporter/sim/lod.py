@@ -280,7 +280,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         from .reference import ReferenceSolver
 
         ref = ReferenceSolver([trees[i] for i in members], scene, quality, loads, log=log,
-                              timestep=quality.reference_step)
+                              timestep=quality.reference_step, split_blasts=True)
         # a tree taken for large motion or a moment near breaking comes back
         # once it is in the linear range again (not with projectiles about)
         back = ho.step_length if ho is not None and ho.kind in RETURNABLE else None

@@ -162,6 +162,13 @@ SETTLE_TIME = 0.5  # s
 TWIG_HZ = 50.0  # a twig's ringing under a blast front (the blast note's example)
 SPIN_PER_STEP = 0.05  # rad: most a free part turns in one step (more: the step is split)
 MAX_SUBSTEPS = 8
+# A blast's twigs ring on after its push. With `split_blasts` (the planar
+# LOD's nonlinear engine, whose coarse step would damp the ringing:
+# docs/physics.md), a model's step is split to at most BLAST_STEP from a
+# blast's arrival at its trees until BLAST_RING s after its push
+# (loads.blast_windows) has ended
+BLAST_STEP = DEFAULT_TIMESTEP  # s
+BLAST_RING = 0.05  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 LIMIT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
@@ -179,7 +186,7 @@ def floored_inertia(inertia: np.ndarray) -> np.ndarray:
     return (vec * lam) @ vec.T
 
 
-FREE_PART_COUNTS = ("broken", "clamped", "split", "damping_scaled")
+FREE_PART_COUNTS = ("broken", "clamped", "split", "damping_scaled", "blast_split")
 
 
 def free_part_notes(stats: dict) -> list[str]:
@@ -195,6 +202,10 @@ def free_part_notes(stats: dict) -> list[str]:
     if stats["split"]:
         notes.append(f"steps split in up to {MAX_SUBSTEPS} where free parts spun faster than "
                      f"{SPIN_PER_STEP:g} rad per step, on {stats['split']} model-steps")
+    if stats.get("blast_split"):
+        notes.append(f"steps split to at most {BLAST_STEP * 1e3:.4g} ms while a blast pushed or "
+                     f"its twigs rang (until {BLAST_RING:g} s after its push), on "
+                     f"{stats['blast_split']} model-steps")
     if stats["damping_scaled"]:
         notes.append(f"structural damping of free parts scaled down on "
                      f"{stats['damping_scaled']} steps, to what an explicit step can remove "
@@ -225,6 +236,7 @@ class Stats:
     clamped: int = 0  # updates at which a free part's spin was clamped to MAX_SPIN
     damping_scaled: int = 0  # steps at which a model with free parts had its damping scaled down
     split: int = 0  # steps a model with fast-spinning free parts took in substeps
+    blast_split: int = 0  # steps a model took in substeps while a blast pushed or rang
     # the largest bending moment any breakable joint reached, as a fraction of
     # its strength: (fraction, tree, segment path, time s); >= 1 where one broke
     closest: tuple | None = None
@@ -276,7 +288,8 @@ class ReferenceSolver:
     already merged by it (bone_length)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None, timestep: float | None = None, force_rate: float | None = None):
+                 log=None, timestep: float | None = None, force_rate: float | None = None,
+                 split_blasts: bool = False):
         self.scene, self.quality, self.loads = scene, quality, loads
         self.log = log or (lambda msg: None)
         self.trees = [t for t in trees if t.active]
@@ -292,6 +305,14 @@ class ReferenceSolver:
         self.timing = {"compile_seconds": 0.0, "step_seconds": 0.0, "update_seconds": 0.0}
         self.events: list[Event] = []
         self._collect()
+        # MuJoCo steps per step while a blast pushes or rings (BLAST_RING),
+        # and when, per tree (s)
+        self.blast_split = max(1, math.ceil(self.h / BLAST_STEP - 1e-9)) if split_blasts else 1
+        tree_bones = [slice(self.offsets[ti], self.offsets[ti + 1])
+                      for ti in range(len(self.trees))]
+        self.blast_windows = [self.loads.blast_windows(self.com0[b], self.axis0[b],
+                                                       self.props.take(b))
+                              for b in tree_bones] if self.blast_split > 1 else []
         self._joints()
         self._groups()
         self.track_pos = self.track_quat = None
@@ -615,27 +636,40 @@ class ReferenceSolver:
                 g.data.qvel[v:v + 3] *= MAX_SPIN / np.linalg.norm(g.data.qvel[v:v + 3])
                 self.stats.clamped += 1
 
-    def _split(self) -> None:
+    def _split(self, t: float) -> None:
         """Split the step of models whose free parts spin fast: a stiff
         broken limb rolling on the ground at 40-70 rad/s gained energy
         without bound at h = 2.1 ms (tornado: a broadleaf's stem pieces,
         x3 in 1 s, with no load doing work; at h/2 it decays). The model
         steps in as many equal substeps as keep every free part's turn per
         substep under SPIN_PER_STEP (at most MAX_SUBSTEPS), loads and
-        damping held; counted in stats.split."""
+        damping held; counted in stats.split. And of models a blast pushes
+        or whose twigs it rings (`_blast_rings`), to BLAST_STEP, counted in
+        stats.blast_split."""
         for gi, g in enumerate(self.groups):
-            if not g.has_free:
-                continue
-            bones = g.bones
-            rows = bones[(self.piece_root[bones] >= 0) & (self.group_of_bone[bones] == gi)]
-            w = self.omega[rows]
-            fastest = math.sqrt(float(np.einsum("bi,bi->b", w, w).max())) if len(rows) else 0.0
-            n = min(MAX_SUBSTEPS, max(1, math.ceil(fastest * self.h / SPIN_PER_STEP)))
+            n = self.blast_split if self._blast_rings(g, t) else 1
+            if n > 1:
+                self.stats.blast_split += 1
+            if g.has_free:
+                bones = g.bones
+                rows = bones[(self.piece_root[bones] >= 0) & (self.group_of_bone[bones] == gi)]
+                w = self.omega[rows]
+                fastest = math.sqrt(float(np.einsum("bi,bi->b", w, w).max())) \
+                    if len(rows) else 0.0
+                spin = min(MAX_SUBSTEPS, max(1, math.ceil(fastest * self.h / SPIN_PER_STEP)))
+                if spin > 1:
+                    self.stats.split += 1
+                n = max(n, spin)
             if n != g.substeps:
                 g.substeps = n
                 g.model.opt.timestep = self.h / n
-            if n > 1:
-                self.stats.split += 1
+
+    def _blast_rings(self, g: _Group, t: float) -> bool:
+        """Whether a blast pushes the model's trees within the load interval
+        from t (s), or their twigs still ring: until BLAST_RING s after."""
+        return any(t + self.dt_force >= first and t <= last + BLAST_RING
+                   for ti in g.trees if ti < len(self.blast_windows)
+                   for first, last in self.blast_windows[ti])
 
     def _substeps(self) -> None:
         """The remaining substeps of split models (after their first)."""
@@ -984,7 +1018,7 @@ class ReferenceSolver:
                     self._check(t)
                 if not self.attached.all():
                     self._clamp_spin()
-                    self._split()
+                self._split(t)
                 force = self._external(t)
                 if proj is not None:
                     self._projectile_work(proj)
@@ -1161,7 +1195,8 @@ class ReferenceSolver:
             # docs/physics.md: 50 kg at 3 m from a sapling breaks 15 joints
             # at 1/2000 s, 17 at 1/8000 s, 16 at 1/32000 s
             notes.append(f"reference: a blast rings twigs at tens of Hz, which this step damps "
-                         f"by about {math.pi * TWIG_HZ * self.h:.2g} (ratio, at {TWIG_HZ:g} Hz): "
+                         f"by about {math.pi * TWIG_HZ * self.h / self.blast_split:.2g} (ratio, "
+                         f"at {TWIG_HZ:g} Hz): "
                          "twig peaks, and breaks near a twig's strength, converge only near "
                          "1/64000 s (--timestep)")
         if st.limited:
@@ -1170,7 +1205,7 @@ class ReferenceSolver:
                  "bodies": st.bodies, "bones": self.n, "rebuilds": st.rebuilds,
                  "parts": st.parts, "limited": st.limited, "broken": st.broken,
                  "clamped": st.clamped, "damping_scaled": st.damping_scaled,
-                 "split": st.split}
+                 "split": st.split, "blast_split": st.blast_split}
         if st.closest is not None:
             frac, tree, path, when = st.closest
             stats["closest_to_breaking"] = {"fraction": round(frac, 4), "tree": tree,

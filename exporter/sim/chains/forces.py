@@ -12,7 +12,6 @@ from ...rotations import apply, apply_transposed, cross
 from ..audit import per_tree
 from ..common import cap_loads
 from ..contact import effective_mass, ground_forces, stored_energy
-from ..loads import BoneProps
 
 REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (8 let a
 # hit open a twig's joint 1.1 %)
@@ -146,9 +145,7 @@ class ChainForces:
         """Loads on the debris bones (gravity, air, blasts), held `hold` s
         from t, capped."""
         d = self.debris.bones
-        props = BoneProps(*(getattr(self.props, f)[d] for f in
-                            ("mass", "wood_area", "leaf_area", "diameter", "cd_wood", "cd_leaf")))
-        force = self.loads.forces(t, com, vcom, axis, props, dt=hold)
+        force = self.loads.forces(t, com, vcom, axis, self.props.take(d), dt=hold)
         return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])),
                          self.loads.blast_capped)
 
