@@ -83,14 +83,17 @@ class ChainForces:
         frame = self.bone_frame[bb]
         moving = (frame >= 0) & ~self.in_debris[bb]
         if prev is not None and moving.any():
-            # d'Alembert forces of the parent bone's accelerating frame
+            # d'Alembert forces of the parent bone's accelerating frame, from
+            # the motion of its own COM (a material point: the lumped COG
+            # moves within the body when a part breaks off, and its velocity
+            # jumps by omega x the shift, which is no acceleration)
             p = frame[moving]
             child = bb[moving]
-            acc = (pose["vcog"][p] - prev["vcog"][p]) / since
+            acc = (pose["vcom"][p] - prev["vcom"][p]) / since
             alpha = (pose["omega"][p] - prev["omega"][p]) / since
             w = pose["omega"][p]
-            r = cog[child] - cog[p]
-            v_rel = pose["vcog"][child] - pose["vcog"][p] - cross(w, r)
+            r = cog[child] - com[p]
+            v_rel = pose["vcog"][child] - pose["vcom"][p] - cross(w, r)
             a_frame = (acc + cross(alpha, r) + cross(w, cross(w, r))
                        + 2 * cross(w, v_rel))
             f_b[moving] -= self.lump_mass[child][:, None] * a_frame
