@@ -284,8 +284,11 @@ class ReferenceSolver:
     report) is rounded so that a frame is a whole number of force
     intervals; `force_rate` (Hz, default DEFAULT_FORCE_RATE; inf = every
     step) is how often the loads are evaluated (damping is every step).
-    `quality` is the planar LOD's and only recorded: the rig's bones are
-    already merged by it (bone_length)."""
+    With `split_blasts` (the planar LOD's engine, at its coarse step), a
+    model's step is split to at most BLAST_STEP while a blast pushes its
+    trees and their twigs ring (BLAST_RING). `quality` is the planar LOD's
+    and only recorded: the rig's bones are already merged by it
+    (bone_length)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  log=None, timestep: float | None = None, force_rate: float | None = None,
