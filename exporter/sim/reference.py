@@ -649,6 +649,8 @@ class ReferenceSolver:
         damping held; counted in stats.split. And of models a blast pushes
         or whose twigs it rings (`_blast_rings`), to BLAST_STEP, counted in
         stats.blast_split."""
+        if self.blast_split == 1 and not any(g.has_free for g in self.groups):
+            return  # (every model steps whole: nothing can have split it)
         for gi, g in enumerate(self.groups):
             n = self.blast_split if self._blast_rings(g, t) else 1
             if n > 1:
