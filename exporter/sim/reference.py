@@ -1199,9 +1199,10 @@ class ReferenceSolver:
         if self.scene.explosions:
             # docs/physics.md: 50 kg at 3 m from a sapling breaks 15 joints
             # at 1/2000 s, 17 at 1/8000 s, 16 at 1/32000 s
-            notes.append(f"reference: a blast rings twigs at tens of Hz, which this step damps "
-                         f"by about {math.pi * TWIG_HZ * self.h / self.blast_split:.2g} (ratio, "
-                         f"at {TWIG_HZ:g} Hz): "
+            h = self.h / self.blast_split  # s, the step while a blast pushes and rings
+            notes.append(f"reference: a blast rings twigs at tens of Hz, which its step there "
+                         f"({h * 1e3:.4g} ms) damps by about {math.pi * TWIG_HZ * h:.2g} "
+                         f"(ratio, at {TWIG_HZ:g} Hz): "
                          "twig peaks, and breaks near a twig's strength, converge only near "
                          "1/64000 s (--timestep)")
         if st.limited:
