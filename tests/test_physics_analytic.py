@@ -41,6 +41,28 @@ def test_single_bone_matches_spring_pendulum(tmp_path, hanging):
     assert abs(x[np.searchsorted(t, 1.0)]) > 0.01
 
 
+@pytest.mark.parametrize("level, step", [("default", 1 / 960), ("final", 1 / 1000)])
+def test_pymunk_springs_damp_as_the_reference_step_does(tmp_path, level, step):
+    """A spring's damping on the pymunk tier is c = k h_c / 2, h_c the
+    substep or 1 ms, whichever is longer: a mode of f Hz decays at
+    zeta = omega h_c / 4 = pi f h_c / 2, what the reference's discrete step of
+    1/2000 s gives it. At `final` (1920 Hz) that is the 1 ms value, not half
+    of it. No structural damping and no gravity: the spring pendulum's free
+    decay is all the spring's (Chipmunk: c / (2 sqrt(k I)))."""
+    length, diameter, k = 1.0, 0.05, 2000.0
+    grammar = f"density: {RHO}\ndamping: 0\n{BARE}axiom: @stiffness({k})!({diameter})F({length})\n"
+    m = RHO * math.pi / 4 * diameter**2 * length
+    f = pendulum_frequency(k, m, length, diameter / 2, 0.0, False)
+    bake = bake_text(tmp_path, grammar, duration=2.5, fps=960, gravity=0.0,
+                     quality={"base": level, "tier": "pymunk"},
+                     pull=[{"tree": 0, "force": [20.0, 0, 0], "release": 1.0, "at": 1.0}])
+    t, x = bake.times, tip(bake.trees[0])[:, 0]
+    free = t > 1.02
+    assert frequency(t[free], x[free]) == pytest.approx(f, rel=0.02)
+    assert damping_ratio(t[free], x[free], cycles=10) == pytest.approx(
+        math.pi * f * step / 2, rel=0.1)
+
+
 def cantilever_grammar(n, length=10.0, diameter=0.2, damping=0.0):
     return (f"density: {RHO}\nmodulus: {E}\ndamping: {damping}\n{BARE}iterations: {n}\n"
             f"axiom: !({diameter})A({n})\nA(n) : n > 0 -> F({length}/{n})A(n-1)\n")

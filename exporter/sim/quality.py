@@ -60,8 +60,8 @@ QUALITIES = {
     "default": Quality("default", 960.0, 120.0, 10, 2, 0.0, linear_rate=24.0,
                        reference_step=1 / 480),
     # a felled tree at `final` goes to the reference (when installed): at 1/1000 s it
-    # conserved energy on every felled species where the pymunk tier's one-way
-    # coupling made 2.3 % of a sapling's (docs/physics.md), in 0.2-1.1x its time
+    # gained at most 0.17 % on every felled species, where the pymunk tier's one-way
+    # coupling makes 1.7 % of a sapling's (docs/physics.md), in 0.2-1.1x its time
     # (3.2-3.7x on the willow, whose 1,328 broken parts are free bodies in contact)
     "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.2,
                      reference_step=1 / 1000, cut_engine="nonlinear"),

@@ -19,6 +19,14 @@ from ..stability import inertia_floor
 
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
+# s: the springs' damping is c = k h_c / 2 with h_c the substep or this,
+# whichever is longer. That damps a mode of f Hz by zeta = pi f h_c / 2, as
+# the reference's discrete step of 1/2000 s does (pi f h): the twigs' modes
+# have no other damping to speak of, and one-way coupling lets a parent
+# drive a twig at resonance without losing what it gives, so a damping that
+# shrank with the step made finer levels break and gain more, not less
+# (docs/physics.md, "Spring damping")
+SPRING_DAMPING_STEP = 1 / 1000
 
 
 def apparent_mass(r: float, zeta: float) -> float:
@@ -226,9 +234,10 @@ class ChainBuild:
         self.stats.inertia_floored = int(floored.sum())
         self.stats.max_inertia_ratio = float(
             (self.i_eff / np.maximum(self.i_n, 1e-12)).max()) if nb else 1.0
-        # damping: c = k h / 2 on the springs; mass-proportional alpha as an
-        # exact exponential decay over a force interval
-        c = 0.5 * h * kb
+        # damping: c = k h_c / 2 on the springs (SPRING_DAMPING_STEP);
+        # mass-proportional alpha as an exact exponential decay over a force
+        # interval
+        c = 0.5 * max(h, SPRING_DAMPING_STEP) * kb
         self.body_alpha = self.alpha[self.body_bone]
         self.body_mass = lm
         # Chipmunk corrects 10 % of a joint's position error per 1/60 s by

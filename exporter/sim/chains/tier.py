@@ -25,8 +25,9 @@ docs/physics.md has the derivations and the measurements behind each choice.
 - Prestress: spring rest angles are offset so that the grown shape is the
   equilibrium under gravity (scene `prestress = true`).
 - Stability: stability.py (the rotary-inertia floor); spring damping
-  c = k h / 2 damps the highest chain modes (omega h / 4) and barely touches
-  the sway; structural damping is mass-proportional (rig.alpha) and applied
+  c = k h_c / 2 (h_c the substep, at least 1 ms: the reference's numerical
+  damping at 1/2000 s) damps the highest chain modes and barely touches the
+  sway; structural damping is mass-proportional (rig.alpha) and applied
   as an exact exponential decay over each force interval.
 - Breaking: a joint whose bending moment (spring plus cone limit) exceeds
   its strength is removed. In a root chain the part above falls on as a
