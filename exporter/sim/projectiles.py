@@ -17,6 +17,9 @@ from ..rotations import cross
 from ..model import TreeModel
 from ..scene import Scene
 
+NEAR_MARGIN = 0.1  # m: what a hold's gravity and the bones' own motion may add
+NEAR_SPEED = 1.0  # m/s: slower projectiles hit at the force rate
+
 
 def closest_segment_points(p0, p1, q0, q1):
     """Closest points between segments p0-p1 (N, 3) and q0-q1 (N, 3): the
@@ -107,7 +110,33 @@ class Projectiles:
                 q = self.quat[i] + dq
                 self.quat[i] = q / np.linalg.norm(q)
 
+    def near(self, pose, solver, hold: float) -> bool:
+        """Whether a flying projectile (faster than NEAR_SPEED) may touch a
+        bone within `hold` s (each bone's bounding sphere against the
+        projectile's reach). One at rest by a tree is not: its contacts are
+        slow, and it would hold the updates at every substep for the rest
+        of the shot."""
+        live = np.nonzero(self.launched & (np.linalg.norm(self.vel, axis=1) > NEAR_SPEED))[0]
+        if not len(live):
+            return False
+        piv = pose["pivot"]
+        tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
+        mid = 0.5 * (piv + tip)
+        half = 0.5 * np.linalg.norm(tip - piv, axis=1) + solver.radius
+        for i in live:
+            reach = half + self.radius[i] + np.linalg.norm(self.vel[i]) * hold + NEAR_MARGIN
+            if (np.linalg.norm(mid - self.pos[i], axis=1) < reach).any():
+                return True
+        return False
+
     def _hit_bones(self, i, a, b, v, pose, solver):
+        """Hits of projectile i on its path a -> b (m) at velocity v (m/s):
+        every bone its sphere touches takes an impulse, nearest along the
+        path first, each against the velocity the ones before left it (a
+        box thrown into a sapling hits the stem behind the twigs: with one
+        contact per step the twigs in front shielded it, and a 60 kg box
+        passed through). Returns the path fraction of the first hit and the
+        velocity after all, or None."""
         piv = pose["pivot"]
         tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
         mid = 0.5 * (piv + tip)
@@ -119,17 +148,24 @@ class Projectiles:
         m = len(near)
         s, _, dist, cp, cq = closest_segment_points(np.repeat(a[None], m, 0),
                                                     np.repeat(b[None], m, 0), piv[near], tip[near])
-        touching = dist < solver.radius[near] + self.radius[i]
-        if not touching.any():
-            return None
-        k = np.nonzero(touching)[0]
-        k = k[np.argmin(s[k])]
-        bone = int(near[k])
-        point = cq[k]
-        normal = cp[k] - cq[k]
+        touching = np.nonzero(dist < solver.radius[near] + self.radius[i])[0]
+        first = None
+        for k in touching[np.argsort(s[touching], kind="stable")]:
+            after = self._impulse(i, int(near[k]), cp[k], cq[k], v, pose, solver)
+            if after is not None:
+                v = after
+                first = float(s[k]) if first is None else first
+        return None if first is None else (first, v)
+
+    def _impulse(self, i, bone, on_path, on_bone, v, pose, solver):
+        """Exchange an impulse between projectile i (velocity v, m/s) and a
+        bone touching it (closest points on its path and on the bone, m),
+        with restitution and Coulomb friction. Returns the projectile's new
+        velocity, or None where the two already separate."""
+        normal = on_path - on_bone
         nn = np.linalg.norm(normal)
         normal = normal / nn if nn > 1e-9 else -v / max(np.linalg.norm(v), 1e-9)
-        v_bone = pose["vcog"][bone] + cross(pose["omega"][bone], point - pose["cog"][bone])
+        v_bone = pose["vcog"][bone] + cross(pose["omega"][bone], on_bone - pose["cog"][bone])
         rel = v - v_bone
         vn = rel @ normal
         if vn >= 0:
@@ -141,15 +177,19 @@ class Projectiles:
         st = np.linalg.norm(vt)
         jt = np.zeros(3) if st < 1e-9 else -vt / st * min(self.mu[i] * jn, reduced * st)
         impulse = jn * normal + jt  # on the projectile
-        before = 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
+        before = self._energy(i, v)
         v = v + impulse / self.mass[i]
         r = -normal * self.radius[i]
         self.spin[i] += cross(r, jt) / self.inertia[i]
-        after = 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
+        after = self._energy(i, v)
         solver.add_work(bone, max(before - after, 0.0))  # the most the tree can have got
-        solver.apply_impulse(bone, -impulse, point + normal * solver.radius[bone], pose)
+        solver.apply_impulse(bone, -impulse, on_bone + normal * solver.radius[bone], pose)
         self.hits += 1
-        return float(s[k]), v
+        return v
+
+    def _energy(self, i: int, v: np.ndarray) -> float:
+        """Kinetic energy (J) of projectile i at velocity v (m/s) and its spin."""
+        return 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
 
     def _ground(self, i: int, dt: float) -> None:
         r = self.radius[i]

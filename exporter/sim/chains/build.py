@@ -267,6 +267,7 @@ class ChainBuild:
             space.add(pivot, spring, limit)
             self.joints.append([pivot, spring, limit])
         self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
+        self.hit_impulse = np.zeros((nb, 3))  # N s, N s, N m s: hits not yet delivered
         self._buffers()
 
     def _prestress(self) -> np.ndarray:

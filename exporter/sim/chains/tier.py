@@ -189,8 +189,8 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 # update at the substep rate; so too while a blast pushes
                 # (its capped push turns twigs within one 8 ms hold: the
                 # audit found 3 % of its work unexplained)
-                ahead = 1 if self.contact_active or self._blast_pushing(t) else \
-                    self.update_every
+                ahead = 1 if (self.contact_active or self._blast_pushing(t)
+                              or self._projectile_near()) else self.update_every
                 self.forces(t, self.pose, self.prev,
                             max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
                 self.last_update, self.next_update = self.substep, self.substep + ahead
@@ -290,6 +290,13 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         hold (SceneLoads.blast_pushing, at the current pose)."""
         return bool(self.loads.explosions) and self.loads.blast_pushing(
             t, self.update_every * self.h, self.pose["com"], self._axes(self.pose), self.props)
+
+    def _projectile_near(self) -> bool:
+        """Whether a flying projectile may touch a bone within the next
+        update's hold: updates then come every substep, so that a hit is
+        found within a substep's flight and delivered over one."""
+        return self.projectiles is not None and self.projectiles.near(
+            self.pose, self, self.update_every * self.h)
 
     def add_work(self, bone: int, joules: float) -> None:
         """Energy given to a bone's tree from outside (a projectile's hit)."""
