@@ -19,8 +19,8 @@ from ..stability import inertia_floor
 
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
-# s: the springs' damping is c = k h_c / 2 with h_c the substep or this,
-# whichever is longer. That damps a mode of f Hz by zeta = pi f h_c / 2, as
+# The springs' damping is c = k h_c / 2 with h_c the substep or this step
+# (s), whichever is longer. That damps a mode of f Hz by zeta = pi f h_c / 2, as
 # the reference's discrete step of 1/2000 s does (pi f h): the twigs' modes
 # have no other damping to speak of, and one-way coupling lets a parent
 # drive a twig at resonance without losing what it gives, so a damping that

@@ -119,7 +119,9 @@ class ChainForces:
             # a projectile's hits reach the bodies as forces over this hold
             # (one substep while a projectile is near): as a jump of one
             # body's velocity, a box's hit on a sapling's stem outran the
-            # pivots' solver and opened a joint 1.4 %
+            # pivots' solver and opened a joint 1.4 %. (A body broken off
+            # since its hit gets none of it: the ledger counted it as work,
+            # so that can only show as a loss.)
             out[self.live_rows] += self.hit_impulse[live] / dt
             self.hit_impulse[:] = 0.0
 
@@ -136,19 +138,20 @@ class ChainForces:
                           & ~self.grounded[self.bone_tree[self.body_bone]])[0]
         if len(free):
             r = self.rigid_root[free]
-
-            def cog(i):
-                c, sn = np.cos(s[i, 2]), np.sin(s[i, 2])
-                arm = self.cog2d0[i] - self.q0[i]
-                return s[i, 0:2] + np.stack([c * arm[:, 0] - sn * arm[:, 1],
-                                             sn * arm[:, 0] + c * arm[:, 1]], 1)
-
             w = s[r, 5]
-            lever = cog(free) - cog(r)  # from the root's COG: v = v_root + w x lever
+            lever = self._cogs(free) - self._cogs(r)  # from the root's COG: v = v_root + w x lever
             out[free, 0] -= s[r, 3] - w * lever[:, 1]
             out[free, 1] -= s[r, 4] + w * lever[:, 0]
             out[free, 2] -= w
         return out
+
+    def _cogs(self, bodies: np.ndarray) -> np.ndarray:
+        """The bodies' centres of gravity (N, 2) in their planes, m."""
+        s = self.state
+        c, sn = np.cos(s[bodies, 2]), np.sin(s[bodies, 2])
+        arm = self.cog2d0[bodies] - self.q0[bodies]
+        return s[bodies, 0:2] + np.stack([c * arm[:, 0] - sn * arm[:, 1],
+                                          sn * arm[:, 0] + c * arm[:, 1]], 1)
 
     def _debris_loads(self, t: float, com: np.ndarray, vcom: np.ndarray, axis: np.ndarray,
                       hold: float) -> np.ndarray:
@@ -251,9 +254,6 @@ class ChainForces:
         for k in range(self.planes_of_bone[bone]):
             i = self.body_of[(bone, k)]
             e, d = self.body_e[i], self.body_d[i]
-            j2, x2 = np.array([j @ e, j @ d]), np.array([x @ e, x @ d])
-            c, s = np.cos(self.state[i, 2]), np.sin(self.state[i, 2])
-            arm = self.cog2d0[i] - self.q0[i]
-            cog = self.state[i, 0:2] + np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
-            r = x2 - cog
+            j2 = np.array([j @ e, j @ d])
+            r = np.array([x @ e, x @ d]) - self._cogs(np.array([i]))[0]
             self.hit_impulse[i] += (j2[0], j2[1], r[0] * j2[1] - r[1] * j2[0])
