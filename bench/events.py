@@ -20,6 +20,7 @@ bakes alone (independent of either solver's bookkeeping):
     python bench/events.py [--cases felling boxes explosion blast] [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
                            [--quality final]      # the LOD's level (default: the scene's)
+                           [--engine pymunk]      # the LOD's nonlinear engine without MuJoCo
 
 A blast on a sapling is the case to convergence-check (`--timestep`): the
 reference's peak twig moments ("closest to breaking", the largest moment /
@@ -30,6 +31,7 @@ broken (15 at 1/2000 s, 16-17 at 1/8000-1/32000 s) much less.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from fractions import Fraction
@@ -136,9 +138,14 @@ def main() -> None:
                     help="the full reference's step, s (e.g. 1/64000; default: its own)")
     ap.add_argument("--quality", choices=list(QUALITIES), default=None,
                     help="the planar LOD's level (default: the scene's own)")
+    ap.add_argument("--engine", choices=["auto", "pymunk"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed) or "
+                         "pymunk (what an install without the `reference` extra runs)")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
     level = QUALITIES[args.quality] if args.quality else None
+    if args.engine == "pymunk":  # the presets' own level is `default`
+        level = dataclasses.replace(level or QUALITIES["default"], nonlinear="pymunk")
     step = float(args.timestep) if args.timestep else None
     rows = []
     for case in args.cases:
@@ -149,9 +156,13 @@ def main() -> None:
                               quality=level if solver == "planar" else None)
             m = measure(bake, scene)
             m.update(case=case, solver=solver, timestep=bake.meta.get("substep"),
-                     quality=args.quality if solver == "planar" else None)
+                     quality=args.quality if solver == "planar" else None,
+                     engine=args.engine if solver == "planar" else None)
             rows.append(m)
-            label = f"{solver} {args.quality}" if solver == "planar" and args.quality else solver
+            label = solver
+            if solver == "planar":
+                label = " ".join([solver] + [x for x in (args.quality, args.engine)
+                                             if x not in (None, "auto")])
             for t in m["trees"]:
                 print(f"{case:<8} {label:<7} {t['name']:<8} energy x{t['max_energy_ratio']:<7.3f}"
                       f" (frame {t['at_frame']:>3})  COM z {t['com_start']:.2f} -> max "
@@ -177,6 +188,8 @@ def main() -> None:
     name = f"events-{args.timestep}".replace("/", "_") if args.timestep else "events"
     if args.quality:
         name += f"-{args.quality}"
+    if args.engine != "auto":
+        name += f"-{args.engine}"
     (out / f"{name}.json").write_text(json.dumps(rows, indent=2, default=str) + "\n")
 
 
