@@ -48,6 +48,14 @@ def closest_segment_points(p0, p1, q0, q1):
     return s, u, np.linalg.norm(cp - cq, axis=1), cp, cq
 
 
+def bone_spheres(pose: dict, solver):
+    """The bones' pivots and tips (B, 3) in `pose`, and the spheres that
+    bound them: centres (B, 3) and radii (B,), m."""
+    piv = pose["pivot"]
+    tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
+    return piv, tip, 0.5 * (piv + tip), 0.5 * np.linalg.norm(tip - piv, axis=1) + solver.radius
+
+
 class Projectiles:
     def __init__(self, shapes, sizes, masses, positions, velocities, times, restitution,
                  friction, frames: int):
@@ -119,10 +127,7 @@ class Projectiles:
         live = np.nonzero(self.launched & (np.linalg.norm(self.vel, axis=1) > NEAR_SPEED))[0]
         if not len(live):
             return False
-        piv = pose["pivot"]
-        tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
-        mid = 0.5 * (piv + tip)
-        half = 0.5 * np.linalg.norm(tip - piv, axis=1) + solver.radius
+        _, _, mid, half = bone_spheres(pose, solver)
         for i in live:
             reach = half + self.radius[i] + np.linalg.norm(self.vel[i]) * hold + NEAR_MARGIN
             if (np.linalg.norm(mid - self.pos[i], axis=1) < reach).any():
@@ -137,11 +142,8 @@ class Projectiles:
         contact per step the twigs in front shielded it, and a 60 kg box
         passed through). Returns the path fraction of the first hit and the
         velocity after all, or None."""
-        piv = pose["pivot"]
-        tip = piv + np.einsum("bij,bj->bi", pose["rot"], solver.tip0 - solver.pivot0)
-        mid = 0.5 * (piv + tip)
-        reach = 0.5 * np.linalg.norm(tip - piv, axis=1) + solver.radius + self.radius[i] \
-            + 0.5 * np.linalg.norm(b - a)
+        piv, tip, mid, half = bone_spheres(pose, solver)
+        reach = half + self.radius[i] + 0.5 * np.linalg.norm(b - a)
         near = np.nonzero(np.linalg.norm(mid - 0.5 * (a + b), axis=1) < reach)[0]
         if not len(near):
             return None
