@@ -74,8 +74,12 @@ class ChainForces:
         if self.scene.ground:
             contact = self._ground(pose, dt)
             if contact is not None:
-                self._add_contact(contact, pose, ftot, torque)
-                stem = contact[0][self.bone_frame[contact[0]] < 0]  # root chains' bones
+                owner, point, f, at_base = contact
+                self._add_contact(owner, point, f, pose, ftot, torque)
+                # a stem lies on the ground once a root chain's bone touches
+                # it; its loose base on the ground is only what it stands or
+                # pivots on (an uprooted tree's fall stays undamped by it)
+                stem = owner[(self.bone_frame[owner] < 0) & ~at_base]
                 self.grounded[self.bone_tree[stem]] = True
         bb = self.body_bone
         f_b, t_b = ftot[bb], torque[bb]
@@ -162,11 +166,11 @@ class ChainForces:
         return cap_loads(force, self.mass[d], t, self.stats, lambda i: self.locate(int(d[i])),
                          self.loads.blast_capped)
 
-    def _add_contact(self, contact, pose: dict, ftot: np.ndarray, torque: np.ndarray) -> None:
-        """Add ground contact forces to the touching bones and, through
-        their joints, to every body they hang on (a crown propping up a
-        fallen stem), each at the actual contact point."""
-        owner, point, f = contact
+    def _add_contact(self, owner: np.ndarray, point: np.ndarray, f: np.ndarray, pose: dict,
+                     ftot: np.ndarray, torque: np.ndarray) -> None:
+        """Add ground contact forces f (N) at world points (m) to the
+        touching bones and, through their joints, to every body they hang on
+        (a crown propping up a fallen stem), each at the actual contact point."""
         n, cog = self.n, pose["cog"]
         bones = [owner]
         points = [point]
@@ -193,21 +197,22 @@ class ChainForces:
     def _ground(self, pose: dict, dt: float):
         """Ground contacts of the chain bones (`_touching`), and their forces
         for an update held dt s. Returns the touching bones, the contact
-        points and the forces, or None."""
+        points (m), the forces (N) and which points are a loose base, or None."""
         touching, self.contact_active = self._touching(pose)
         if touching is None:
             return None
-        owner, ends, radius, arm, m_eff = touching
+        owner, ends, radius, arm, m_eff, at_base = touching
         vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
         self.contact_dt = dt
-        return owner, ends, ground_forces(ends, vel, radius, m_eff, dt)
+        return owner, ends, ground_forces(ends, vel, radius, m_eff, dt), at_base
 
     def _touching(self, pose: dict):
         """The chain bones' points in the ground: every bone's tip, and the
         base of every bone no longer held by its joint (a root bone's base
         is its anchor, not a contact); debris handles its own. Returns their
-        bones, points, radii (m), arms from the bones' COGs and effective
-        masses (kg), or None; and whether any comes within CONTACT_MARGIN."""
+        bones, points, radii (m), arms from the bones' COGs, effective
+        masses (kg) and which are a loose base, or None; and whether any
+        comes within CONTACT_MARGIN."""
         tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
         loose = np.nonzero(~self.joint_alive)[0]
         ends = np.concatenate([tips, pose["pivot"][loose]])
@@ -222,10 +227,11 @@ class ChainForces:
         active = bool((low & ~self.in_debris[owner]).any())
         if not near.any():
             return None, active
+        at_base = (np.arange(len(owner)) >= self.n)[near]
         ends, owner, radius = ends[near], owner[near], radius[near]
         arm = ends - pose["cog"][owner]
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
-        return (owner, ends, radius, arm, m_eff), active
+        return (owner, ends, radius, arm, m_eff, at_base), active
 
     def contact_energy(self, pose: dict) -> np.ndarray:
         """Elastic energy (J) per bone held in the ground's contact springs,
@@ -235,7 +241,7 @@ class ChainForces:
             return out
         touching, _ = self._touching(pose)
         if touching is not None:
-            owner, ends, radius, _, m_eff = touching
+            owner, ends, radius, _, m_eff, _ = touching
             np.add.at(out, owner, stored_energy(ends, radius, m_eff, self.contact_dt))
         out[self.debris.bones] += self.debris.contact_energy()
         return out
