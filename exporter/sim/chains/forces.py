@@ -18,6 +18,7 @@ REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (
 REFINE_SPIN = 0.002  # rad: the most a body may turn in one pymunk step
 MAX_REFINE = 32  # pymunk steps per substep at most
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
+CONTACT_LOOKAHEAD = 2.0  # so do bones that would reach it within this many force-rate holds
 
 
 class ChainForces:
@@ -109,7 +110,7 @@ class ChainForces:
         # velocities): C = alpha M, as an exact decay over the interval, so
         # that stiff, fast limbs can never overshoot
         decay = -np.expm1(-self.body_alpha * dt) / dt
-        rel = self._bending_velocity()
+        rel = self._bending_velocity(decay)
         fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * rel[:, 0]
         fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * rel[:, 1]
         tz = (t_loc * self.body_n).sum(1) - decay * self.i_eff * rel[:, 2]
@@ -129,24 +130,42 @@ class ChainForces:
             out[self.live_rows] += self.hit_impulse[live] / dt
             self.hit_impulse[:] = 0.0
 
-    def _bending_velocity(self) -> np.ndarray:
-        """Each body's velocity (vx, vy, w) that structural damping acts on:
-        relative to its frame, and in a chain whose root joint is cut or gone
-        (a felled or uprooted stem), relative to the chain turning rigidly
-        about its root as well while it falls: wood damps bending, not a
-        stem's fall."""
+    def _bending_velocity(self, decay: np.ndarray) -> np.ndarray:
+        """Each body's velocity (vx, vy, w) that structural damping (`decay`
+        1/s per body) acts on: relative to its frame, and in a chain whose
+        root joint is cut or gone (a felled or uprooted stem), relative to
+        the chain's rigid motion as well while it falls: wood damps bending,
+        not a stem's fall. That rigid motion has the chain's momentum and
+        angular momentum about its centre of mass, weighted as the damping
+        weighs each body (decay times mass and inertia), so the damping
+        forces add up to no force and no torque on the chain and only ever
+        take energy out. (Relative to the turn of its root
+        body instead, a root body spun by the ground's contact dragged the
+        rest along: a blasted sapling at `draft` gained 10x its energy.)"""
         s = self.state
         out = s[:, 3:6].copy()
         # (once its stem lies on the ground, the soil takes part: damped whole)
         free = np.nonzero((self.rigid_root >= 0)
                           & ~self.grounded[self.bone_tree[self.body_bone]])[0]
         if len(free):
-            r = self.rigid_root[free]
-            w = s[r, 5]
-            lever = self._cogs(free) - self._cogs(r)  # from the root's COG: v = v_root + w x lever
-            out[free, 0] -= s[r, 3] - w * lever[:, 1]
-            out[free, 1] -= s[r, 4] + w * lever[:, 0]
-            out[free, 2] -= w
+            _, chain = np.unique(self.rigid_root[free], return_inverse=True)
+            m, inertia = decay[free] * self.body_mass[free], decay[free] * self.i_eff[free]
+            x, v, w = self._cogs(free), s[free, 3:5], s[free, 5]
+            total = np.maximum(np.bincount(chain, m), 1e-300)  # undamped: no motion to fit
+
+            def mean(q: np.ndarray) -> np.ndarray:  # mass-weighted, per chain
+                return np.stack([np.bincount(chain, m * q[:, k]) for k in range(2)],
+                                1) / total[:, None]
+
+            r = x - mean(x)[chain]
+            v_com = mean(v)[chain]
+            u = v - v_com
+            spin = np.bincount(chain, m * (r[:, 0] * u[:, 1] - r[:, 1] * u[:, 0]) + inertia * w)
+            turn = (spin / np.maximum(np.bincount(chain, m * (r * r).sum(1) + inertia),
+                                      1e-300))[chain]
+            out[free, 0] -= v_com[:, 0] - turn * r[:, 1]
+            out[free, 1] -= v_com[:, 1] + turn * r[:, 0]
+            out[free, 2] -= turn
         return out
 
     def _cogs(self, bodies: np.ndarray) -> np.ndarray:
@@ -212,7 +231,8 @@ class ChainForces:
         is its anchor, not a contact); debris handles its own. Returns their
         bones, points, radii (m), arms from the bones' COGs, effective
         masses (kg) and which are a loose base, or None; and whether any
-        comes within CONTACT_MARGIN."""
+        comes within CONTACT_MARGIN of the ground, or would reach it within
+        CONTACT_LOOKAHEAD updates at its speed."""
         tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
         loose = np.nonzero(~self.joint_alive)[0]
         ends = np.concatenate([tips, pose["pivot"][loose]])
@@ -222,14 +242,20 @@ class ChainForces:
         # radius deep in the ground and be thrown up by the penalty spring
         radius = np.minimum(self.radius[owner], np.maximum(np.concatenate(
             [self.tip0[:, 2], self.pivot0[loose, 2]]), 0.0))
-        low = ends[:, 2] < radius + CONTACT_MARGIN
+        # a point falling fast reaches the ground within one update held at
+        # the force rate: it went a hold's fall deep before the contact
+        # pushed (a tornado's sapling 0.2 m at draft's 8 ms) and was thrown
+        # back out with more than it brought (3.2 % of its energy)
+        arm = ends - pose["cog"][owner]
+        fall = np.minimum(pose["vcog"][owner, 2] + cross(pose["omega"][owner], arm)[:, 2], 0.0)
+        reach = CONTACT_LOOKAHEAD * self.update_every * self.h
+        low = ends[:, 2] + fall * reach < radius + CONTACT_MARGIN
         near = (ends[:, 2] < radius) & ~self.in_debris[owner]
         active = bool((low & ~self.in_debris[owner]).any())
         if not near.any():
             return None, active
         at_base = (np.arange(len(owner)) >= self.n)[near]
-        ends, owner, radius = ends[near], owner[near], radius[near]
-        arm = ends - pose["cog"][owner]
+        ends, owner, radius, arm = ends[near], owner[near], radius[near], arm[near]
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
         return (owner, ends, radius, arm, m_eff, at_base), active
 
