@@ -42,11 +42,13 @@ from .projectiles import projectile_reaches
 from .quality import Quality, nonlinear_engine
 from .solver import SolveResult, frame_timing
 
-# the pymunk tier's substep for trees a projectile can reach, at least (Hz):
-# a hit jolts the stem, and its chains see their frame's jolt one update
-# later; at draft's 480 Hz the sapling the `boxes` preset's first box breaks
-# gained 3.5 % of its energy by that, at 960 Hz 1.4 % (`default`: 1.3 %)
+# the pymunk tier's substep and force rates for trees a projectile can
+# reach, at least (Hz; `default`'s): a hit jolts the stem, and its chains
+# feel their frame's jolt one update later. At draft's 480 and 60 Hz the
+# sapling the `boxes` preset's first box breaks gained 3.5 % of its energy
+# by that; at 960 and 60 Hz 1.4 %, at 960 and 120 Hz 0.7 %
 HIT_SUBSTEP_RATE = 960.0
+HIT_FORCE_RATE = 120.0
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
 
@@ -138,14 +140,18 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     ref_runs: list[tuple] = []
     first = [i for i, p in enumerate(in_nonlinear) if p]
     if first and engine_for("projectile") == "pymunk":
-        hit = quality if quality.substep_rate >= HIT_SUBSTEP_RATE or not scene.projectiles \
-            else replace(quality, substep_rate=HIT_SUBSTEP_RATE)
+        hit, note = quality, None
+        if scene.projectiles and (quality.substep_rate < HIT_SUBSTEP_RATE
+                                  or quality.force_rate < HIT_FORCE_RATE):
+            hit = replace(quality, substep_rate=max(quality.substep_rate, HIT_SUBSTEP_RATE),
+                          force_rate=max(quality.force_rate, HIT_FORCE_RATE))
+            note = (f"trees a projectile can reach stepped at {hit.substep_rate:.0f} Hz with "
+                    f"loads at {hit.force_rate:.0f} Hz on the pymunk tier, not "
+                    f"{quality.substep_rate:.0f} and {quality.force_rate:.0f} (its hits jolt "
+                    "the stems between coarser updates)")
         tier = chains.PymunkTier([trees[i] for i in first], scene, hit, loads, log=log)
-        if hit is not quality:
-            tier.stats.notes.append(
-                f"trees a projectile can reach stepped at {HIT_SUBSTEP_RATE:.0f} Hz on the pymunk "
-                f"tier, not {quality.substep_rate:.0f} (its hits jolt the stems between coarser "
-                "updates)")
+        if note is not None:
+            tier.stats.notes.append(note)
         tier.begin()
         pym.append((tier, first))
     elif first:
