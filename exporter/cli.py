@@ -578,7 +578,7 @@ def cmd_stability(args) -> int:
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     levels = tuple(args.quality) if args.quality else ("draft", "default", "final")
     results = stability(args.out, long=not args.quick, solvers=solvers, only=args.case,
-                        levels=levels, log=log)
+                        levels=levels, log=log, engine=args.engine)
     failed = [r for r in results if not r.passed]
     if args.json:
         from dataclasses import asdict
@@ -768,6 +768,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="planar: the LOD; full: the MuJoCo reference; both (default)")
     p.add_argument("--quality", nargs="*", choices=("draft", "default", "final"),
                    help="the LOD's quality levels to run (default: all three)")
+    p.add_argument("--engine", choices=("auto", "pymunk"), default="auto",
+                   help="the LOD's engine for what leaves its linear tier: auto (default: "
+                        "the reference when MuJoCo is installed) or pymunk (cuts too: what an "
+                        "install without the `reference` extra runs)")
     p.add_argument("--case", nargs="*", metavar="NAME",
                    help="only these cases (quote names with spaces): "
                         f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the long "
