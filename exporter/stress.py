@@ -391,7 +391,7 @@ def stability(out: str | Path = "out/stability", long: bool = True,
             runs.append(("full", "default"))
         for solver, level in runs:
             r = run(case, solver, level, engine)
-            log(f"{case.name:<22} {r.solver:<15} {'PASS' if r.passed else 'FAIL'}  growth "
+            log(f"{case.name:<22} {r.solver:<19} {'PASS' if r.passed else 'FAIL'}  growth "
                 f"{r.energy_growth:.3g}  gain {r.gain:.3g}  gap {r.gap:.3g}  "
                 f"spin {r.spin:.3g}  {r.seconds:.1f} s" + (f"  {r.error}" if r.error else ""))
             results.append(r)
