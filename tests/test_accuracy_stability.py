@@ -81,9 +81,9 @@ def test_event_case_at_draft_without_mujoco(name):
     # what `pip install treebake` runs: the pymunk tier for every event. At
     # draft the blasted sapling gained 1.2x its energy and the tornado's
     # 1.9x (a freed stem's damping dragged it along with its root body, spun
-    # by the ground; a falling tip went 0.2 m into the ground within one
-    # 8 ms hold), and the crate too light to break the oak at draft swayed
-    # 13 % above the fall rule, which a sway does not obey
+    # by the ground; a broken stem's loose base went 0.16 m into the ground
+    # within one 20.8 ms hold), and the crate too light to break the oak at
+    # draft swayed 13 % above the fall rule, which a sway does not obey
     case = next(c for c in cases(long=True) if c.name == name)
     r = run(case, "planar", "draft", engine="pymunk")
     assert r.solver == "planar draft pymunk"
