@@ -304,7 +304,7 @@ def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -
     if solver == "planar":
         quality = QUALITIES[level]
         if engine == "pymunk":
-            quality = replace(quality, nonlinear="pymunk", cut_engine="pymunk")
+            quality = replace(quality, nonlinear="pymunk")  # cuts follow it (cut_engine)
             label += " pymunk"
     start = time.perf_counter()
     try:

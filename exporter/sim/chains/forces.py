@@ -221,8 +221,7 @@ class ChainForces:
         touching, self.contact_active = self._touching(pose)
         if touching is None:
             return None
-        owner, ends, radius, arm, m_eff, at_base = touching
-        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
+        owner, ends, radius, vel, m_eff, at_base = touching
         self.contact_dt = dt
         return owner, ends, ground_forces(ends, vel, radius, m_eff, dt), at_base
 
@@ -230,8 +229,8 @@ class ChainForces:
         """The chain bones' points in the ground: every bone's tip, and the
         base of every bone no longer held by its joint (a root bone's base
         is its anchor, not a contact); debris handles its own. Returns their
-        bones, points, radii (m), arms from the bones' COGs, effective
-        masses (kg) and which are a loose base, or None; and whether any
+        bones, points, radii (m), velocities (m/s), effective masses (kg)
+        and which are a loose base, or None; and whether any
         comes within CONTACT_MARGIN of the ground, or would reach it within
         CONTACT_LOOKAHEAD updates at its speed."""
         tips = pose["pivot"] + apply(pose["rot"], self.tip0 - self.pivot0)
@@ -249,9 +248,9 @@ class ChainForces:
         # 0.16 m within one 20.8 ms hold) and was thrown back out with
         # more than it brought (3.2 % of the tree's energy)
         arm = ends - pose["cog"][owner]
-        fall = np.minimum(pose["vcog"][owner, 2] + cross(pose["omega"][owner], arm)[:, 2], 0.0)
+        vel = pose["vcog"][owner] + cross(pose["omega"][owner], arm)
         reach = CONTACT_LOOKAHEAD * self.update_every * self.h
-        low = ends[:, 2] + fall * reach < radius + CONTACT_MARGIN
+        low = ends[:, 2] + np.minimum(vel[:, 2], 0.0) * reach < radius + CONTACT_MARGIN
         near = (ends[:, 2] < radius) & ~self.in_debris[owner]
         active = bool((low & ~self.in_debris[owner]).any())
         if not near.any():
@@ -259,7 +258,7 @@ class ChainForces:
         at_base = (np.arange(len(owner)) >= self.n)[near]
         ends, owner, radius, arm = ends[near], owner[near], radius[near], arm[near]
         m_eff = effective_mass(self.lump_mass[owner], self.i_eff[self.body_of_bone0[owner]], arm)
-        return (owner, ends, radius, arm, m_eff, at_base), active
+        return (owner, ends, radius, vel[near], m_eff, at_base), active
 
     def contact_energy(self, pose: dict) -> np.ndarray:
         """Elastic energy (J) per bone held in the ground's contact springs,
