@@ -29,6 +29,19 @@ def matrices_from_rotvec(rho: np.ndarray) -> np.ndarray:
     return r
 
 
+def rotvec_rate(rho: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Angular velocities (N, 3, rad/s) of exp(rho) (N, 3) while rho changes
+    at `rate` (N, 3, rad/s): the exponential map's left Jacobian times the
+    rate. It is the rate itself only while rho keeps its direction."""
+    theta = np.linalg.norm(rho, axis=1)
+    small = theta < 1e-4
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24, (1 - np.cos(theta)) / (safe * safe))
+    b = np.where(small, 1 / 6 - theta**2 / 120, (safe - np.sin(theta)) / safe**3)
+    turned = cross(rho, rate)
+    return rate + a[:, None] * turned + b[:, None] * cross(rho, turned)
+
+
 def rotation_rows(rho: np.ndarray) -> np.ndarray:
     """Rotation matrices (3, 3, N) from rotation vectors (3, N): the
     structure-of-arrays form of matrices_from_rotvec (each entry a

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from treebake.pipeline import grow, prepare
+from treebake.rotations import rotvecs_from_matrices
 from treebake.scene import parse_scene
 from treebake.sim.chains import PymunkTier
 from treebake.sim.loads import SceneLoads
@@ -119,3 +120,52 @@ def test_a_break_does_not_jolt_the_chains_that_stay_on_the_body(tmp_path):
     still = tier.force_rows[rows].copy()
     scale = tier.lump_mass[tier.body_bone[light]] * 9.81  # the branch's weight, N
     assert np.abs(across - still)[:, :2].max() < 1e-6 * scale.max(), (across, still)
+
+
+def test_the_velocities_rebuilt_are_the_rate_of_the_pose_rebuilt(tmp_path):
+    """A bone bending in two planes turns by exp(theta_0 n_0 + theta_1 n_1)
+    in its frame. Its angular velocity is then not theta_0' n_0 +
+    theta_1' n_1 (the two only agree while one plane turns): the rotation
+    vector's rate must go through the exponential map's Jacobian. Checked
+    against a central finite difference of the rebuilt poses, every bone
+    of a stem and the branch riding on it bent 0.5-0.9 rad in both planes
+    and turning at 2-4 rad/s: the rotations' rate and every COM's velocity.
+    (With theta' n summed, a child's frame turned at the wrong rate: the
+    energy audit charged a 70 m/s gale on a sapling with 4.9 % of its energy
+    as made from nothing, 3.1 % with the Jacobian.)"""
+    path = tmp_path / "g.lsys"
+    path.write_text(GRAMMAR)
+    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
+                         "wind": {"speed": 5.0}}, file="<test>")
+    grown = grow(scene)
+    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
+    trees, _, _, _ = prepare(scene, grown, loads, QUALITIES["default"])
+    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
+    tier.begin()
+    assert (tier.planes_of_bone == 2).all()
+    rng = np.random.default_rng(3)
+    nb = len(tier.bodies)
+    state = tier.state.copy()
+    state[:, 2] = rng.uniform(0.5, 0.9, nb) * rng.choice([-1.0, 1.0], nb)
+    state[:, 3:5] = rng.uniform(-1.0, 1.0, (nb, 2))
+    state[:, 5] = rng.uniform(2.0, 4.0, nb) * rng.choice([-1.0, 1.0], nb)
+    dt = 1e-6  # s
+
+    # pymunk's position is a body's origin (its pivot), its velocity the
+    # centre of gravity's: the origin moves at v - w x (cog - origin)
+    tier.state[:] = state
+    arm = tier._cogs(np.arange(nb)) - state[:, 0:2]
+    origin_rate = state[:, 3:5] - state[:, 5:6] * np.stack([-arm[:, 1], arm[:, 0]], 1)
+
+    def pose_at(offset: float) -> dict:
+        tier.state[:] = state
+        tier.state[:, 0:2] += offset * origin_rate
+        tier.state[:, 2] += offset * state[:, 5]
+        return tier.reconstruct()
+
+    now, ahead, behind = pose_at(0.0), pose_at(dt), pose_at(-dt)
+    turn = rotvecs_from_matrices(np.einsum("nij,nkj->nik", ahead["rot"], behind["rot"]))
+    rate = turn / (2 * dt)
+    assert np.abs(now["omega"] - rate).max() < 1e-5 * np.abs(rate).max(), (now["omega"], rate)
+    vcom = (ahead["com"] - behind["com"]) / (2 * dt)
+    assert np.abs(now["vcom"] - vcom).max() < 1e-5 * np.abs(vcom).max(), (now["vcom"], vcom)

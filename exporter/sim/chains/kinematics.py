@@ -8,7 +8,7 @@ import numpy as np
 from pymunk import batch
 
 from ...errors import SimulationError
-from ...rotations import apply, compose, cross, matrices_from_rotvec
+from ...rotations import apply, compose, cross, matrices_from_rotvec, rotvec_rate
 from ..common import MAX_ANGULAR_SPEED
 from ..stability import chain_gaps
 from .build import EYE
@@ -32,24 +32,32 @@ class ChainKinematics:
         n, s = self.n, self.state
         b0, b1, two = self.plane_rows
         # plane 0 of every bone, plus plane 1 where a bone has one; the axial
-        # (d) part is simulated in every plane: average it
+        # (d) part is simulated in every plane: average it. A body's
+        # position is its origin (the pivot) and its velocity its centre of
+        # gravity's: the origin moves at v - w x (cog - origin)
         disp = s[:, 0:2] - self.q0
+        arm = self._cogs(np.arange(len(s))) - s[:, 0:2]
+        v_origin = s[:, 3:5] + s[:, 5:6] * np.stack([arm[:, 1], -arm[:, 0]], 1)
         rho = s[b0, 2:3] * self.body_n[b0]
         off = disp[b0, 0:1] * self.body_e[b0]
-        vrel = s[b0, 3:4] * self.body_e[b0]
-        wrel = s[b0, 5:6] * self.body_n[b0]
+        voff = v_origin[b0, 0:1] * self.body_e[b0]
+        rate = s[b0, 5:6] * self.body_n[b0]
         axial = disp[b0, 1:2]
-        v_axial = s[b0, 4:5]
+        v_axial = v_origin[b0, 1:2]
         if len(two):
             c = b1[two]
             rho[two] += s[c, 2:3] * self.body_n[c]
             off[two] += disp[c, 0:1] * self.body_e[c]
-            vrel[two] += s[c, 3:4] * self.body_e[c]
-            wrel[two] += s[c, 5:6] * self.body_n[c]
+            voff[two] += v_origin[c, 0:1] * self.body_e[c]
+            rate[two] += s[c, 5:6] * self.body_n[c]
             axial[two] = 0.5 * (axial[two] + disp[c, 1:2])
-            v_axial[two] = 0.5 * (v_axial[two] + s[c, 4:5])
+            v_axial[two] = 0.5 * (v_axial[two] + v_origin[c, 1:2])
         off += axial * self.body_d[b0]
-        vrel += v_axial * self.body_d[b0]
+        voff += v_axial * self.body_d[b0]
+        # the bone turns by exp(rho) in its frame: bent in two planes, its
+        # angular velocity is not rho's rate (the children riding on it
+        # turned at the wrong rate: docs/physics.md, "Two planes")
+        wrel = rotvec_rate(rho, rate)
         own = matrices_from_rotvec(rho)
         rot = np.empty((n, 3, 3))
         pivot = np.empty((n, 3))
@@ -89,7 +97,7 @@ class ChainKinematics:
             # before them (a body's own axial velocity would be averaged over
             # two planes, wrong once one plane turns far: a felled stem)
             hp = piv[:, 0]
-            hv = apply(rp[h], vrel[heads]) - cross(apply(rp[h], wrel[heads]), c[h] - hp)
+            hv = apply(rp[h], voff[heads])
             fh = lv["p"][h]
             held = fh >= 0
             if held.any():
