@@ -32,7 +32,6 @@ from ..scene import Scene
 from . import chains  # chains.PymunkTier loads pymunk when a tree first needs it
 from . import quality as quality_levels
 from .chains import StartState, Stats
-from .chains.forces import MAX_REFINE
 from .common import SimTree, TreeMotion, cap_note
 from .debris import MAX_SPIN
 from .events import TIER, Event
@@ -411,7 +410,7 @@ TIMED = ("step_seconds", "update_seconds")  # a reference run's cost (compiling 
 def merge_stats(stats: list[Stats]) -> Stats:
     """One Stats for several pymunk tiers: counts add up, extremes take the worst."""
     out = Stats()
-    worst = {"max_inertia_ratio", "max_joint_gap"}
+    worst = {"max_inertia_ratio", "max_joint_gap", "max_refine"}
     for r in stats:
         for f in fields(Stats):
             a, b = getattr(out, f.name), getattr(r, f.name)
@@ -554,9 +553,9 @@ def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: floa
                      f"(the step's error estimate at {tree} {path}: {error:.2%} of its height, "
                      f"past {ERROR_TOLERANCE:.2%})")
     if stats.refined:
-        notes.append(f"{stats.refined} substeps were split into up to {MAX_REFINE} steps while a "
-                     "blast, a hit, a capped load or a fast spin acted (pivots drift with the "
-                     "square of the step)")
+        notes.append(f"{stats.refined} substeps were split into up to {stats.max_refine} steps "
+                     "while a blast, a hit, a capped load or a fast spin acted (pivots drift "
+                     "with the square of the step)")
     notes += list(dict.fromkeys(stats.notes))
     if stats.broken:
         notes.append(f"{stats.broken} joints broke; {stats.debris} parts fell off as debris")

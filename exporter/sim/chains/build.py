@@ -336,6 +336,7 @@ class ChainBuild:
             # (v + omega x shift), or the break would jolt what stays
             origin, before = body.position, body.local_to_world(body.center_of_gravity)
             body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
+            self.cog2d0[i] = c2  # what _cogs reads (damping, hits, velocities)
             body.position = origin
             shift = body.local_to_world(body.center_of_gravity) - before
             w = body.angular_velocity

@@ -16,7 +16,9 @@ from ..contact import effective_mass, ground_forces, stored_energy
 REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (8 let a
 # hit open a twig's joint 1.1 %)
 REFINE_SPIN = 0.002  # rad: the most a body may turn in one pymunk step
-MAX_REFINE = 32  # pymunk steps per substep at most
+MAX_REFINE = 32  # pymunk steps per substep at most, while the pivots hold
+GAP_REFINE = 128  # ... once a pivot has opened past GAP_WATCH
+GAP_WATCH = 0.0025  # fraction of the bones' length (a quarter of tier.MAX_JOINT_GAP)
 CONTACT_MARGIN = 0.05  # m: bones this close to the ground update every substep
 CONTACT_LOOKAHEAD = 2.0  # so do bones that would reach it within this many force-rate holds
 
@@ -47,12 +49,19 @@ class ChainForces:
         # an impulsive load (a blast front, a hit, a capped load) spins parts
         # fast, and pivots drift by about (omega h)^2 r per step: step finer
         # meanwhile, and while anything spins fast, so that no body turns
-        # more than REFINE_SPIN per step (up to MAX_REFINE steps a substep)
+        # more than REFINE_SPIN per step (up to MAX_REFINE steps a substep;
+        # up to GAP_REFINE once a pivot has opened past GAP_WATCH: a twig a
+        # blast spins at 300 rad/s opened its pivot from 0.5 % to 1.1 % within
+        # one frame at MAX_REFINE, and stopped the bake)
         spin = float(np.abs(self.state[self.in_space, 5]).max(initial=0.0))
         impulsive = self.loads.blast_active or self.stats.limited > limited or (
             self.projectiles is not None and self.projectiles.hits > hits)
-        self.refine = int(min(MAX_REFINE, max(REFINE if impulsive else 1,
-                                              math.ceil(spin * self.h / REFINE_SPIN))))
+        want = max(REFINE if impulsive else 1, math.ceil(spin * self.h / REFINE_SPIN))
+        cap = MAX_REFINE
+        if want > MAX_REFINE and self.joint_gap() > GAP_WATCH:
+            cap = GAP_REFINE
+        self.refine = int(min(cap, want))
+        self.stats.max_refine = max(self.stats.max_refine, self.refine)
         if self.debris.count:
             self.debris.step(dt, lambda c, v, ax, start, h: self._debris_loads(t + start, c, v,
                                                                                 ax, h))

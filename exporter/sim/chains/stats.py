@@ -24,6 +24,7 @@ class Stats:
     limited: int = 0  # bone updates whose load was capped at MAX_ACCELERATION
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
     refined: int = 0  # substeps split into finer steps (blasts, hits, caps, fast spins)
+    max_refine: int = 1  # the most steps a substep was split into
     broken: int = 0
     debris: int = 0
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)
