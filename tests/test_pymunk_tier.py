@@ -135,8 +135,7 @@ def test_the_velocities_rebuilt_are_the_rate_of_the_pose_rebuilt(tmp_path):
     as made from nothing, 3.1 % with the Jacobian.) Checked again after
     breaks: a body whose lumped COG moved must be rebuilt from pymunk's
     COG, not the one it was built with (a stale one made a broken bamboo
-    culm's head 8 % slow, and its contact with the ground spun it to
-    245 rad/s in the `hurricane` preset)."""
+    culm's head 8 % slow in the `hurricane` preset)."""
     path = tmp_path / "g.lsys"
     path.write_text(GRAMMAR)
     scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,

@@ -56,7 +56,7 @@ class ChainKinematics:
         voff += v_axial * self.body_d[b0]
         # the bone turns by exp(rho) in its frame: bent in two planes, its
         # angular velocity is not rho's rate (the children riding on it
-        # turned at the wrong rate: docs/physics.md, "Two planes")
+        # turned at the wrong rate: docs/physics.md, "Planes")
         wrel = rotvec_rate(rho, rate)
         own = matrices_from_rotvec(rho)
         rot = np.empty((n, 3, 3))
