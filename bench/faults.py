@@ -250,7 +250,10 @@ def case_dask_relative_out(tmp):
 
 def case_concurrent_bakes(tmp):
     out = tmp / "out"
-    first = start("bake", SAPLING, "--out", out, "--name", "x", "--duration", "20", "-q")
+    # long enough to still hold the lock when the second starts (20 s of
+    # the sapling simulate in 0.9 s: on a loaded machine the second found
+    # the first done and baked); it is interrupted once the second returns
+    first = start("bake", SAPLING, "--out", out, "--name", "x", "--duration", "600", "-q")
     deadline = time.time() + 60
     while not (out / "x" / ".treebake.lock").exists() and time.time() < deadline:
         time.sleep(0.05)
