@@ -20,6 +20,19 @@ GRAMMAR = ("density: 800\nmodulus: 8e9\ndamping: 0.05\n"
            "axiom: !(0.2)F(1)F(1)[&(60)!(0.12)F(1.2)F(1)]F(1)F(1)\n")
 
 
+def _tier(tmp_path, grammar: str) -> PymunkTier:
+    """A pymunk tier, begun, for one tree of `grammar` in a 5 m/s wind."""
+    path = tmp_path / "g.lsys"
+    path.write_text(grammar)
+    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
+                         "wind": {"speed": 5.0}}, file="<test>")
+    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
+    trees, _, _, _ = prepare(scene, grow(scene), loads, QUALITIES["default"])
+    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
+    tier.begin()
+    return tier
+
+
 def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tmp_path):
     """When a branch breaks off, the bodies that carried it lose its mass
     and their centres of gravity move within them. A body's wood must go on
@@ -27,16 +40,7 @@ def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tm
     keeps a body's velocity at its centre of gravity, so that velocity must
     change by omega x the shift. Checked at every remaining body's pivot and
     tip, spinning at 3 rad/s."""
-    path = tmp_path / "g.lsys"
-    path.write_text(GRAMMAR)
-    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
-                         "wind": {"speed": 5.0}},
-                        file="<test>")
-    grown = grow(scene)
-    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
-    trees, _, _, _ = prepare(scene, grown, loads, QUALITIES["default"])
-    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
-    tier.begin()
+    tier = _tier(tmp_path, GRAMMAR)
     branch = int(np.nonzero(tier.bone_frame >= 0)[0][0])  # the side chain's first bone
     stays = [i for i in range(len(tier.bodies)) if tier.bone_frame[tier.body_bone[i]] < 0]
     for i, body in enumerate(tier.bodies):
@@ -88,17 +92,9 @@ def test_a_break_does_not_jolt_the_chains_that_stay_on_the_body(tmp_path):
     break (the same instant). Measured from the pose of the bone's own COM,
     they are; from the lumped COG's, the branch got 1,300 m/s^2 for a
     substep when an oak's twig broke in a blast (docs/physics.md)."""
-    path = tmp_path / "g.lsys"
-    path.write_text("density: 800\nmodulus: 8e9\ndamping: 0.05\n"
-                    "axiom: !(0.2)F(1)F(1)[&(60)!(0.12)F(1.2)F(1)][/(180)&(45)!(0.04)F(0.6)]"
-                    "F(1)F(1)\n")
-    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
-                         "wind": {"speed": 5.0}}, file="<test>")
-    grown = grow(scene)
-    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
-    trees, _, _, _ = prepare(scene, grown, loads, QUALITIES["default"])
-    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
-    tier.begin()
+    tier = _tier(tmp_path, "density: 800\nmodulus: 8e9\ndamping: 0.05\n"
+                 "axiom: !(0.2)F(1)F(1)[&(60)!(0.12)F(1.2)F(1)][/(180)&(45)!(0.04)F(0.6)]"
+                 "F(1)F(1)\n")
     children = np.nonzero(tier.bone_frame >= 0)[0]
     heavy = int(children[np.argmax(tier.mass[children])])  # the thick branch's first bone
     light = [i for i in range(len(tier.bodies))
@@ -136,15 +132,7 @@ def test_the_velocities_rebuilt_are_the_rate_of_the_pose_rebuilt(tmp_path):
     breaks: a body whose lumped COG moved must be rebuilt from pymunk's
     COG, not the one it was built with (a stale one made a broken bamboo
     culm's head 8 % slow in the `hurricane` preset)."""
-    path = tmp_path / "g.lsys"
-    path.write_text(GRAMMAR)
-    scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
-                         "wind": {"speed": 5.0}}, file="<test>")
-    grown = grow(scene)
-    loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
-    trees, _, _, _ = prepare(scene, grown, loads, QUALITIES["default"])
-    tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
-    tier.begin()
+    tier = _tier(tmp_path, GRAMMAR)
     assert (tier.planes_of_bone == 2).all()
     _check_rebuilt_velocities(tier)
     # the same after the branch breaks off the second bone (whose lumped
