@@ -180,3 +180,30 @@ def _check_rebuilt_velocities(tier) -> None:
     assert np.abs(now["omega"] - rate).max() < 1e-5 * np.abs(rate).max(), (now["omega"], rate)
     vcom = (ahead["com"] - behind["com"]) / (2 * dt)
     assert np.abs(now["vcom"] - vcom).max() < 1e-5 * np.abs(vcom).max(), (now["vcom"], vcom)
+
+
+def test_a_stems_light_top_breaks_off_as_debris_and_a_heavy_one_as_a_chain(tmp_path):
+    """A stem snapped near its top frees a piece of well under 1 % of the
+    tree: it flies on as rigid debris, out of pymunk's space, with the
+    momentum it had; snapped at its second bone, the part above (most of
+    the tree) falls on as a free planar chain."""
+    widths = [0.3, 0.26, 0.22, 0.18, 0.14, 0.1, 0.07, 0.05, 0.03, 0.015]
+    axiom = "".join(f"!({w})F(1)" for w in widths)
+    grammar = f"density: 800\nmodulus: 8e9\ndamping: 0.05\naxiom: {axiom}\n"
+    tier = _tier(tmp_path, grammar)
+    for i, body in enumerate(tier.bodies):
+        body.angular_velocity = 1.0
+        body.velocity = (0.3 + 0.05 * i, -0.1)
+    tier.read()
+    pose = tier.reconstruct()
+    top = tier.n - 1
+    assert tier.mass[top] < 0.01 * tier.mass.sum()  # the light piece: the top bone alone
+    momentum = tier.mass[top] * pose["vcom"][top]
+    tier.break_joint(top, 0.0, pose, "test")
+    assert tier.in_debris[top] and not tier.in_debris[:top].any()
+    assert not any(tier.in_space[tier.body_of[(top, k)]] for k in range(tier.planes_of_bone[top]))
+    after = tier.reconstruct()
+    assert np.allclose(tier.mass[top] * after["vcom"][top], momentum, atol=1e-12)
+    tier.break_joint(1, 0.0, after, "test")  # above it, two thirds of the tree
+    assert not tier.in_debris[1:top].any()
+    assert all(tier.in_space[tier.body_of[(b, 0)]] for b in range(1, top))

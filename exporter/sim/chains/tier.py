@@ -31,7 +31,8 @@ docs/physics.md has the derivations and the measurements behind each choice.
   as an exact exponential decay over each force interval.
 - Breaking: a joint whose bending moment (spring plus cone limit) exceeds
   its strength is removed. In a root chain the part above falls on as a
-  free planar chain (a snapped or uprooted stem); elsewhere the part broken
+  free planar chain (a snapped or uprooted stem); elsewhere, or when that
+  part is a stem's light top (breaking.LIGHT_PIECE), the part broken
   off becomes rigid debris (debris.py). Felling removes a root joint's
   spring and cone at the cut (the hinge holds), then the hinge when the lean
   passes `hinge` degrees.
