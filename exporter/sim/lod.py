@@ -157,43 +157,55 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         ref_runs.append((first, 0.0, None, None, 0.0))
     uses = [TierUse(engine_for("projectile") if p else "linear") for p in in_nonlinear]
 
-    def pymunk_from(group: list[tuple[int, HandOff]]) -> tuple[chains.PymunkTier, list[int]]:
-        """A pymunk tier for trees handed over at one substep."""
-        members = [i for i, _ in group]
+    def pymunk_from(group: list[tuple[int, HandOff, HandOff]],
+                    f: int) -> tuple[chains.PymunkTier, list[int]]:
+        """A pymunk tier for trees (i, hand-off, the state it starts from)
+        starting at one substep, brought up to frame f - 1."""
+        members = [i for i, _, _ in group]
         tier = chains.PymunkTier([trees[i] for i in members], scene, quality, loads, log=log)
-        tier.begin(group[0][1].substep,
-                   StartState(np.concatenate([ho.rot for _, ho in group]),
-                              np.concatenate([ho.omega for _, ho in group])))
-        if all(ho.kind in RETURNABLE for _, ho in group):
+        substep = group[0][2].substep
+        tier.begin(substep, StartState(np.concatenate([st.rot for _, _, st in group]),
+                                       np.concatenate([st.omega for _, _, st in group])))
+        if all(ho.kind in RETURNABLE for _, ho, _ in group):
             tier.hand_back = group[0][1].step_length
+        for ff in range(math.ceil(substep / tier.spf - 1e-9), f):  # from before a blast
+            tier.advance_frame(ff)
         return tier, members
 
     handed: list = []
+    linear_work: dict[int, float] = {}  # J done on a tree in the linear tier before it left
 
-    def leaves(i: int, ho: HandOff) -> str:
-        """Tree i left a linear tier (`ho`): its engine, recorded and logged."""
+    def leaves(i: int, ho: HandOff) -> tuple[str, HandOff]:
+        """Tree i left a linear tier (`ho`): its engine, recorded and logged,
+        and the state that engine starts from: the pymunk tier takes a tree
+        that leaves while a blast is under way from where the blast found
+        it (linear.py, `_keep_before_blast`), the reference where it left."""
         to = engine_for(ho.kind)
+        start = ho.before_blast if to == "pymunk" and ho.before_blast is not None else ho
+        reason = ho.reason if start is ho else \
+            f"{ho.reason} at {ho.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
         u = uses[i]
-        uses[i] = TierUse(f"linear, then {to}", round(ho.time, 6), ho.reason) \
+        uses[i] = TierUse(f"linear, then {to}", round(start.time, 6), reason) \
             if u.switch is None else \
             TierUse(f"{u.tier}, then {to}", u.switch,
-                    f"{u.reason}; to {to} at {ho.time:.3f} s: {ho.reason}")
-        handed.append(Event(ho.time, trees[i].name, TIER, "", f"to {to}: {ho.reason}"))
-        log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier ({ho.reason})")
-        return to
+                    f"{u.reason}; to {to} at {start.time:.3f} s: {reason}")
+        handed.append(Event(start.time, trees[i].name, TIER, "", f"to {to}: {reason}"))
+        log(f"t = {ho.time:.3f} s: {trees[i].name} leaves the linear tier ({reason})")
+        return to, start
 
     for f in range(1, frames):
         if lin is not None:
             to_pymunk: dict[int, list] = {}  # substep -> hand-offs: one pymunk tier each
             for ho in lin.advance_frame(f):
                 i = lin_idx[ho.tree]
-                if leaves(i, ho) == "pymunk":
-                    to_pymunk.setdefault(ho.substep, []).append((i, ho))
+                to, start = leaves(i, ho)
+                linear_work[i] = start.work
+                if to == "pymunk":
+                    to_pymunk.setdefault(start.substep, []).append((i, ho, start))
                 else:  # the reference's hinges are the linear tier's coordinates
-                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho,
-                                     float(lin.ledger.running[ho.tree])))
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, ho.work))
             for group in to_pymunk.values():
-                pym.append(pymunk_from(group))
+                pym.append(pymunk_from(group, f))
         for tier, _ in pym:
             tier.advance_frame(f)
         if progress is not None:
@@ -243,8 +255,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 returns.append((i, f_back, q[lo:hi], v[lo:hi]))
 
     for tier, members in pym:
-        take_pymunk(tier, members, [float(lin.ledger.running[lin_idx.index(i)])
-                                    if i in lin_idx else 0.0 for i in members])
+        take_pymunk(tier, members, [linear_work.get(i, 0.0) for i in members])
 
     def linear_from(i: int, f_back: int, q: np.ndarray, v: np.ndarray, work_before: float):
         """Tree i in a linear tier of its own from frame f_back, with the
@@ -261,10 +272,11 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         later = []
         for f in range(f_back + 1, frames):
             for ho in tier.advance_frame(f):
-                work = work_before + float(tier.ledger.running[0])
-                if leaves(i, ho) == "pymunk":
-                    p_tier, _ = pymunk_from([(i, ho)])
-                    for ff in range(math.ceil(ho.substep / p_tier.spf - 1e-9), frames):
+                to, start = leaves(i, ho)
+                work = work_before + start.work
+                if to == "pymunk":
+                    p_tier, _ = pymunk_from([(i, ho, start)], f)
+                    for ff in range(f, frames):
                         p_tier.advance_frame(ff)
                     later.append((p_tier, [i], work))
                 else:

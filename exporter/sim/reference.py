@@ -149,7 +149,7 @@ from .common import (
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .events import AT_REST, BROKE, CUT, HINGE, TIER, UPROOTED, Event
-from .linear import RETURN_DETAIL, RETURN_WINDOW, in_return_range
+from .linear import BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, in_return_range
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .quality import Quality
@@ -170,7 +170,6 @@ MAX_SUBSTEPS = 8
 # blast's arrival at its trees until BLAST_RING s after its push
 # (loads.blast_windows) has ended
 BLAST_STEP = DEFAULT_TIMESTEP  # s
-BLAST_RING = 0.05  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 IN_GROUND = 4  # contype of a capsule in the ground at rest: projectiles hit it, the ground not
