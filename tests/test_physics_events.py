@@ -311,7 +311,7 @@ def test_a_tree_the_pymunk_tier_takes_during_a_blast_gets_the_whole_push(root):
     pymunk tier, which carries a child chain's push to its parent only as a
     rigid lump. Taken 13 ms into the push, the twigs held the impulse and
     the stem not yet, and the stem never got it: the `explosion` preset's
-    oak swayed at a quarter of the reference's amplitude, its sapling's
+    oak swayed at a quarter of its amplitude with MuJoCo, its sapling's
     stem top peaked at 22 % of its height against 28 % on the reference.
     The pymunk tier now takes the tree from where the blast found it: the
     stem moves as with the pymunk tier from the start, and its peak is
