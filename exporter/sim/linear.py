@@ -39,7 +39,7 @@ from .audit import Ledger, LoadWork, per_tree
 from .common import Bones, SimTree, TreeMotion, cap_loads, locate
 from .joint_space import JointSpace
 from .layout import ChainLayout
-from .loads import SceneLoads
+from .loads import SceneLoads, meets
 from .quality import Quality
 from .treefactor import depths
 
@@ -259,8 +259,7 @@ class LinearTier:
         model = self.model
         t0 = time.perf_counter()
         if self.part == 0:
-            self.blast_step = any(self.t + self.h >= first and self.t <= last
-                                  for first, last in self.blast_windows)
+            self.blast_step = meets(self.blast_windows, self.t, self.h)
             self._keep_before_blast()
             self.parts = max(BLAST_SPLIT if self.blast_step else 1, self.stats.parts)
             if self.blast_step:
@@ -352,9 +351,7 @@ class LinearTier:
         `explosion` preset 13 ms into the push, when its twigs held the
         impulse and its trunk not yet, its trunk swayed at a quarter of the
         reference's amplitude; lod.py starts it from here instead.)"""
-        near = any(self.t + self.h >= first and self.t <= last + BLAST_RING
-                   for first, last in self.blast_windows)
-        if not near:
+        if not meets(self.blast_windows, self.t, self.h, BLAST_RING):
             self.before_blast = {}
             return
         if self.before_blast or self.model is None:

@@ -162,8 +162,7 @@ class SceneLoads:
     def blast_pushing(self, t: float, dt: float, com: np.ndarray, axis: np.ndarray,
                       props: BoneProps) -> bool:
         """Whether a blast pushes any of these bones within [t, t + dt] s."""
-        return any(t + dt >= first and t <= last
-                   for first, last in self.blast_windows(com, axis, props))
+        return meets(self.blast_windows(com, axis, props), t, dt)
 
     def blasts_passed(self, t: float, com: np.ndarray, axis: np.ndarray,
                       props: BoneProps) -> bool:
@@ -191,6 +190,12 @@ class SceneLoads:
             if a.strength != 0:
                 quiet = max(quiet, min(a.end, self.scene.duration))
         return quiet
+
+
+def meets(windows, t: float, dt: float, after: float = 0.0) -> bool:
+    """Whether [t, t + dt] s meets any of the (first, last) windows (s),
+    each extended by `after` s (blast_windows; a blast's ringing)."""
+    return any(t + dt >= first and t <= last + after for first, last in windows)
 
 
 def _drag_per_bone(air, vel, axis, props: BoneProps) -> np.ndarray:

@@ -150,7 +150,7 @@ from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .events import AT_REST, BROKE, CUT, HINGE, TIER, UPROOTED, Event
 from .linear import BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, in_return_range
-from .loads import SceneLoads
+from .loads import SceneLoads, meets
 from .projectiles import projectile_reaches
 from .quality import Quality
 from .solver import SolveResult, frame_timing
@@ -685,9 +685,8 @@ class ReferenceSolver:
     def _blast_rings(self, g: _Group, t: float) -> bool:
         """Whether a blast pushes the model's trees within the load interval
         from t (s), or their twigs still ring: until BLAST_RING s after."""
-        return any(t + self.dt_force >= first and t <= last + BLAST_RING
-                   for ti in g.trees if ti < len(self.blast_windows)
-                   for first, last in self.blast_windows[ti])
+        return any(meets(self.blast_windows[ti], t, self.dt_force, BLAST_RING)
+                   for ti in g.trees if ti < len(self.blast_windows))
 
     def _substeps(self) -> None:
         """The remaining substeps of split models (after their first)."""
