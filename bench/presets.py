@@ -5,7 +5,7 @@ fraction of its energy and the work done on it; the bake warns past 2 %)
 and the joints broken.
 
     python bench/presets.py [--quality default] [--solver planar|full] [--only NAME ...]
-                            [--json out/bench/presets.json]
+                            [--engine pymunk] [--json out/bench/presets.json]
 
 Timings are from one run on a shared machine: compare ratios, not absolutes.
 """
@@ -13,6 +13,7 @@ Timings are from one run on a shared machine: compare ratios, not absolutes.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -28,10 +29,15 @@ from treebake.sim.events import BROKE, UPROOTED
 from treebake.sim.quality import QUALITIES
 
 
-def bench(path: Path, quality: str | None, solver: str = "planar") -> dict:
+def bench(path: Path, quality: str | None, solver: str = "planar", engine: str = "auto") -> dict:
     scene = load_scene(path, {"quality": quality} if quality else None)
+    level = None
+    if engine == "pymunk" and solver == "planar":
+        level = dataclasses.replace(scene.quality, nonlinear="pymunk")
     started = time.perf_counter()
-    bake = bake_scene(scene, solver=solver)
+    cpu = time.process_time()
+    bake = bake_scene(scene, solver=solver, quality=level)
+    cpu = time.process_time() - cpu
     wall = time.perf_counter() - started
     t = bake.timing
     simulated = [tb for tb in bake.trees if not tb.static]
@@ -45,9 +51,10 @@ def bench(path: Path, quality: str | None, solver: str = "planar") -> dict:
         "simulated_trees": len(simulated), "segments": sum(tb.n_segments for tb in bake.trees),
         "simulated_segments": sum(tb.n_segments for tb in simulated),
         "simulated_seconds": scene.duration, "wall_seconds": round(wall, 3),
+        "cpu_seconds": round(cpu, 3),
         "physics_seconds": round(t.get("step_seconds", 0) + t.get("update_seconds", 0), 3),
         "us_per_segment_step": round(1e6 * wall / steps, 3) if steps else None,
-        "solver": solver, "broken_joints": broken,
+        "solver": solver, "engine": engine, "broken_joints": broken,
         "worst_gain_fraction": audit[worst]["max_gain_fraction"] if worst else 0.0,
         "worst_gain_tree": worst, "worst_gain_at_s": audit[worst]["at_s"] if worst else None,
         "notes": bake.meta.get("notes", []),
@@ -59,19 +66,23 @@ def main() -> None:
     ap.add_argument("--quality", choices=tuple(QUALITIES))
     ap.add_argument("--solver", choices=("planar", "full"), default="planar")
     ap.add_argument("--only", nargs="*", help="preset names")
+    ap.add_argument("--engine", choices=["auto", "pymunk"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed) or "
+                         "pymunk (what an install without the `reference` extra runs)")
     ap.add_argument("--json", default=str(ROOT / "out" / "bench" / "presets.json"))
     args = ap.parse_args()
     rows = []
     print(f"{'preset':<11} {'trees':>5} {'sim':>4} {'segments':>8} {'sim s':>6} {'wall s':>7} "
-          f"{'us/seg-step':>11} {'broken':>6} {'worst gain':>10}  tree")
+          f"{'cpu s':>7} {'us/seg-step':>11} {'broken':>6} {'worst gain':>10}  tree")
     for path in sorted((ROOT / "presets").glob("*.toml")):
         if args.only and path.stem not in args.only:
             continue
-        r = bench(path, args.quality, args.solver)
+        r = bench(path, args.quality, args.solver, args.engine)
         rows.append(r)
         us = f"{r['us_per_segment_step']:.3f}" if r["us_per_segment_step"] else "-"
         print(f"{r['preset']:<11} {r['trees']:>5} {r['simulated_trees']:>4} {r['segments']:>8} "
-              f"{r['simulated_seconds']:>6.1f} {r['wall_seconds']:>7.2f} {us:>11} "
+              f"{r['simulated_seconds']:>6.1f} {r['wall_seconds']:>7.2f} {r['cpu_seconds']:>7.2f} "
+              f"{us:>11} "
               f"{r['broken_joints']:>6} {r['worst_gain_fraction']:>10.2%}  {r['worst_gain_tree']}",
               flush=True)
     write_text(args.json, json.dumps(rows, indent=2) + "\n")

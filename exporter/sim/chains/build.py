@@ -68,6 +68,11 @@ class ChainBuild:
         self.chain_parent_arr = lay.chain_parent
         self.chain_first = lay.chain_first
         self.bone_frame = lay.bone_frame  # the bone whose frame a bone's chain moves in
+        self.top_stem = np.arange(self.n)  # the stem bone (root chain) a bone hangs on
+        for b in range(self.n):  # parents precede children
+            if self.bone_frame[b] >= 0:
+                self.top_stem[b] = self.top_stem[self.bone_frame[b]]
+        self.root_chains = [ci for ci, p in enumerate(self.chain_parent) if p < 0]
 
     def _lumping(self) -> None:
         """Lumped bodies: a bone plus the chains attached to it, carried as

@@ -150,6 +150,13 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.fresh = True
         self.next_update = self.last_update = substep
         self.contact_active = False
+        self.recoiling = False  # a free stem takes its chains' recoil (forces.py's _recoil)
+        # ... from each lumped bone's velocity (m/s) relative to the stem it
+        # hangs on, and that velocity's moment about the origin (m^2/s), at
+        # the last update
+        self.recoil_v = np.full((n, 3), np.nan)
+        self.recoil_l = np.full((n, 3), np.nan)
+        self.free_pieces = None  # forces.py's _free_pieces, and what they were taken at
         self.contact_dt = self.h  # s, the hold the ground's springs were last set for
         self.refine = 1
         first = substep // self.spf
@@ -190,7 +197,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 # update at the substep rate; so too while a blast pushes
                 # (its capped push turns twigs within one 8 ms hold: the
                 # audit found 3 % of its work unexplained)
-                ahead = 1 if (self.contact_active or self._blast_pushing(t)
+                ahead = 1 if (self.contact_active or self.recoiling or self._blast_pushing(t)
                               or self._projectile_near()) else self.update_every
                 self.forces(t, self.pose, self.prev,
                             max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
