@@ -272,7 +272,8 @@ class ChainBuild:
             space.add(pivot, spring, limit)
             self.joints.append([pivot, spring, limit])
         self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
-        self.hit_impulse = np.zeros((nb, 3))  # N s, N s, N m s: hits not yet delivered
+        # N s, N s, N m s not yet delivered: projectiles' hits, a free stem's recoil (forces.py)
+        self.hit_impulse = np.zeros((nb, 3))
         self._buffers()
 
     def _prestress(self) -> np.ndarray:

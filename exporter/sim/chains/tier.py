@@ -150,10 +150,10 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.fresh = True
         self.next_update = self.last_update = substep
         self.contact_active = False
-        self.recoiling = False  # a free stem takes its chains' recoil (forces.py's _recoil)
-        # ... from each lumped bone's velocity (m/s) relative to the stem it
-        # hangs on, and that velocity's moment about the origin (m^2/s), at
-        # the last update
+        # a free stem takes its chains' recoil (forces.py's _recoil), from each
+        # lumped bone's velocity (m/s) relative to the stem it hangs on and
+        # that velocity's moment about the origin (m^2/s) at the last update
+        self.recoiling = False
         self.recoil_v = np.full((n, 3), np.nan)
         self.recoil_l = np.full((n, 3), np.nan)
         self.free_pieces = None  # forces.py's _free_pieces, and what they were taken at
