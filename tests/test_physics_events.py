@@ -210,7 +210,7 @@ def test_a_tornado_uprooted_broadleaf_on_the_pymunk_tier_creates_no_energy():
 
 def test_a_tornado_uprooted_broadleaf_lands_on_the_pymunk_tier_without_a_bounce():
     """Without MuJoCo, at the `final` level's rates (1920 Hz steps, loads at
-    240 Hz), the `tornado` preset's broadleaf_5 alone: uprooted at 6.9 s, it
+    240 Hz), the `tornado` preset's broadleaf_5 alone: uprooted at 6.5 s, it
     lands at 9.5 s. The recoil of its limbs (the test above) went on while
     the stem lay on the ground, whose stiff springs turn the stem round
     faster than a recoil a substep late follows: it gave the bouncing stem
@@ -226,7 +226,7 @@ def test_a_tornado_uprooted_broadleaf_lands_on_the_pymunk_tier_without_a_bounce(
                                     force_rate=240.0))
     b = bake_scene(scene)
     tree = b.trees[0]
-    assert any(e["kind"] == "uprooted" and e["time"] < 7.5 for e in tree.info["events"])
+    assert any(e["kind"] == "uprooted" and e["time"] < 7.0 for e in tree.info["events"])
     top = tip(tree)
     assert top[-1, 2] < 0.25 * top[0, 2]  # it lies on the ground by the end
     audit = b.meta["energy"]["broadleaf_5"]
