@@ -157,6 +157,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.recoil_v = np.full((n, 3), np.nan)
         self.recoil_l = np.full((n, 3), np.nan)
         self.free_pieces = None  # forces.py's _free_pieces, and what they were taken at
+        self.bent = None  # forces.py's _bent_rows, and what they were taken at
         self.contact_dt = self.h  # s, the hold the ground's springs were last set for
         self.refine = 1
         first = substep // self.spf
