@@ -223,7 +223,7 @@ def test_the_loads_do_the_same_work_on_the_two_planes_as_on_the_pose(tmp_path):
     bone = tier.body_bone
     f_loc = np.einsum("nji,nj->ni", pose["frame_rot"][bone], force[bone])
     t_loc = np.einsum("nji,nj->ni", pose["frame_rot"][bone], torque[bone])
-    turn = tier._turning(pose, f_loc, t_loc)
+    turn = tier._turning(pose, force[bone], torque[bone], f_loc, t_loc)
     v = tier.state[:, 3:5]
     planes = ((f_loc * tier.body_e).sum(1) * v[:, 0] + (f_loc * tier.body_d).sum(1) * v[:, 1]
               + turn * tier.state[:, 5]).sum()

@@ -123,7 +123,7 @@ class ChainForces:
         rel = self._bending_velocity(decay)
         fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * rel[:, 0]
         fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * rel[:, 1]
-        tz = self._turning(pose, f_loc, t_loc) - decay * self.i_eff * rel[:, 2]
+        tz = self._turning(pose, f_b, t_b, f_loc, t_loc) - decay * self.i_eff * rel[:, 2]
         out = self.force_rows
         out[:] = 0.0
         live = self.in_space
@@ -140,84 +140,91 @@ class ChainForces:
             out[self.live_rows] += self.hit_impulse[live] / dt
             self.hit_impulse[:] = 0.0
 
-    def _turning(self, pose: dict, f_loc: np.ndarray, t_loc: np.ndarray) -> np.ndarray:
-        """The torque (N m) each body turns by in its plane, under the forces
-        and torques (N, N m; in its frame) on its bone: about its plane's
-        normal, in a row that bends in two planes as _bent_torques says."""
+    def _turning(self, pose: dict, f_b: np.ndarray, t_b: np.ndarray, f_loc: np.ndarray,
+                 t_loc: np.ndarray) -> np.ndarray:
+        """The torque (N m) each body turns by in its plane, under the force
+        and torque on its bone (N, N m: f_b, t_b in the world, f_loc, t_loc
+        in its frame): about its plane's normal, and in a row that bends in
+        two planes, what makes each plane's angle take the loads' work on
+        the 3D pose.
+
+        A bone bent in both planes turns by exp(rho), rho = theta_0 n_0 +
+        theta_1 n_1, at J(rho) rho' (kinematics.py): its angle theta_i
+        turns it about J n_i, and with it everything after it in its row,
+        whose pivots move by (J n_i) x (its step) per radian. The loads'
+        generalized force on theta_i is therefore n_i . J^T (step x what
+        acts after it + arm x its force + its torque), in 3D. pymunk takes
+        the body's force at its COG and the row's forces after it through
+        its 2D pivots, so the torque it gets is that less their moments in
+        its plane; in one plane the two are the same, and it is the torque
+        about n. (Taken about n in each plane alone, what a 70 m/s gust did
+        on the two planes was not its work on the pose: the stress suite's
+        sapling gained 3.1 % of its energy.)"""
         turn = (t_loc * self.body_n).sum(1)
-        bodies, row = self._bent_rows()
-        if len(bodies):
-            turn[bodies] = self._bent_torques(pose, f_loc, t_loc, bodies, row)
+        bent = self._bent_rows()
+        if bent is None:
+            return turn
+        bones, row, pair, n, e, d, step, arm = bent
+        s = self.state
+        ends = np.cumsum(np.bincount(row)) - 1
+
+        def after(q: np.ndarray) -> np.ndarray:  # what acts after each bone in its row
+            running = np.cumsum(q, axis=0)
+            return running[ends][row] - running
+
+        # in 3D, once per bone (its two planes share the row and its loads)
+        force = f_b[pair[0]]
+        moment = (cross(pose["vec"][bones], after(force))
+                  + cross(pose["cog"][bones] - pose["pivot"][bones], force) + t_b[pair[0]])
+        moment = apply_transposed(pose["frame_rot"][bones], moment)
+        angle = s[pair, 2]
+        moment = rotvec_rate(-(angle[0, :, None] * n[0] + angle[1, :, None] * n[1]),
+                             moment)  # J(rho)^T = J(-rho)
+        for k in range(2):  # each plane: less the force's moments in pymunk's 2D pose
+            i = pair[k]
+            fx, fy = (f_loc[i] * e[k]).sum(1), (f_loc[i] * d[k]).sum(1)
+            gx, gy = after(fx), after(fy)
+            (sx, sy), (ax, ay) = step[k], arm[k]
+            c, sn = np.cos(angle[k]), np.sin(angle[k])
+            turn[i] = ((moment * n[k]).sum(1)
+                       - c * (sx * gy - sy * gx + ax * fy - ay * fx)
+                       + sn * (sx * gx + sy * gy + ax * fx + ay * fy))
         return turn
 
-    def _bent_rows(self) -> tuple[np.ndarray, np.ndarray]:
-        """The bodies of the rows that bend in two planes, each row's in
-        chain order (plane 0's row, then plane 1's), and the index of the
-        row each is in. Kept until a joint, a part or a plane goes."""
+    def _bent_rows(self) -> tuple | None:
+        """The rows that bend in two planes (None: none): their bones, each
+        row's in chain order; the index of the row each is in; each one's
+        body in plane 0 and in plane 1 (2, N); and per plane (2, N, ...)
+        the bodies' normals, axes e and d, and their rest steps (pivot to
+        tip) and COG arms in the plane. Bones gone to debris are left out
+        (they end their rows). Kept until a joint, a part or a plane goes
+        (a part's going moves its carriers' COGs)."""
         key = (int(self.pivot_alive.sum()), int(self.in_debris.sum()),
                int(self.row_start.sum()), int(self.planes_of_bone.sum()))
         if self.bent is not None and self.bent[0] == key:
             return self.bent[1]
-        bodies, row = [], []
-        rows = 0
+        bones, row = [], []
         for lv in self.levels:
             for r in range(len(lv["grid"])):
-                bones = lv["grid"][r][lv["valid"][r]]
-                if (self.planes_of_bone[bones] < 2).any():
-                    continue
-                for k in range(2):
-                    bodies += [self.body_of[(int(b), k)] for b in bones]
-                    row += [rows] * len(bones)
-                    rows += 1
-        out = (np.asarray(bodies, dtype=np.int64), np.asarray(row, dtype=np.int64))
+                mine = lv["grid"][r][lv["valid"][r]]
+                mine = mine[~self.in_debris[mine]]
+                if len(mine) and (self.planes_of_bone[mine] == 2).all():
+                    bones += mine.tolist()
+                    row += [row[-1] + 1 if row else 0] * len(mine)
+        out = None
+        if bones:
+            bones = np.asarray(bones, dtype=np.int64)
+            b0, b1, _ = self.plane_rows
+            pair = np.stack([b0[bones], b1[bones]])
+            e, d = self.body_e[pair], self.body_d[pair]
+            rest = self.tip0[bones] - self.pivot0[bones]
+            step = np.stack([np.stack([(rest * e[k]).sum(1), (rest * d[k]).sum(1)])
+                             for k in range(2)])
+            arm = np.stack([(self.cog2d0[pair[k]] - self.q0[pair[k]]).T for k in range(2)])
+            out = (bones, np.asarray(row, dtype=np.int64), pair, self.body_n[pair], e, d,
+                   step, arm)
         self.bent = (key, out)
         return out
-
-    def _bent_torques(self, pose: dict, f_loc: np.ndarray, t_loc: np.ndarray,
-                      bodies: np.ndarray, row: np.ndarray) -> np.ndarray:
-        """The torque (N m) on each body of a row bent in two planes that
-        makes its plane's angle take the work the loads do on the 3D pose.
-
-        A bone bent in both planes turns by exp(rho), rho = theta_0 n_0 +
-        theta_1 n_1, at J(rho) rho' (kinematics.py): its angle theta_i
-        turns the bone about J n_i, and with it everything after it in the
-        row, whose pivots move by (J n_i) x (its step) per radian. The
-        loads' generalized force on theta_i is therefore n_i . J^T (step x
-        what acts after it + arm x its force + its torque), in 3D; pymunk
-        takes the body's force at its COG and the row's forces after it
-        through its 2D pivots, so the torque it is given is that minus their
-        moments in the plane. In one plane both are the same and this is
-        the torque about n. (Taken about n in each plane alone, what a 70
-        m/s gust did on the two planes was not its work on the pose: the
-        stress suite's sapling gained 3.1 %.)"""
-        s = self.state
-        bone = self.body_bone[bodies]
-        gone = self.in_debris[bone] | ~self.in_space[bodies]
-        force = np.where(gone[:, None], 0.0, f_loc[bodies])
-        torque = np.where(gone[:, None], 0.0, t_loc[bodies])
-        # what acts after each body in its row (rows lie one after another)
-        running = np.cumsum(force, axis=0)
-        after = running[np.cumsum(np.bincount(row)) - 1][row] - running
-        fr = pose["frame_rot"][bone]
-        step = apply_transposed(fr, pose["vec"][bone])
-        arm = apply_transposed(fr, pose["cog"][bone] - pose["pivot"][bone])
-        b0, b1, _ = self.plane_rows
-        n = self.body_n[bodies]
-        rho = (s[b0[bone], 2:3] * self.body_n[b0[bone]]
-               + s[b1[bone], 2:3] * self.body_n[b1[bone]])
-        moment = cross(step, after) + cross(arm, force) + torque
-        q = (rotvec_rate(-rho, moment) * n).sum(1)  # J(rho)^T = J(-rho)
-        # the same moments in the plane, as pymunk's 2D pose has them
-        e, d = self.body_e[bodies], self.body_d[bodies]
-        c, sn = np.cos(s[bodies, 2]), np.sin(s[bodies, 2])
-        rest = self.tip0[bone] - self.pivot0[bone]
-        sx, sy = (rest * e).sum(1), (rest * d).sum(1)
-        sx, sy = c * sx - sn * sy, sn * sx + c * sy
-        ax, ay = (self.cog2d0[bodies] - self.q0[bodies]).T
-        ax, ay = c * ax - sn * ay, sn * ax + c * ay
-        fx, fy = (force * e).sum(1), (force * d).sum(1)
-        gx, gy = (after * e).sum(1), (after * d).sum(1)
-        return q - (sx * gy - sy * gx) - (ax * fy - ay * fx)
 
     def _recoil(self, pose: dict) -> None:
         """A free stem's recoil from what hangs on it. A stem carries its
