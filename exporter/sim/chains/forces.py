@@ -96,6 +96,7 @@ class ChainForces:
         fr = pose["frame_rot"][bb]
         frame = self.bone_frame[bb]
         moving = (frame >= 0) & ~self.in_debris[bb]
+        spin = np.zeros(len(bb))  # N m: the frame's angular acceleration's, on each body
         if prev is not None and moving.any():
             # d'Alembert forces of the parent bone's accelerating frame, from
             # the motion of its own COM (a material point: the lumped COG
@@ -111,8 +112,10 @@ class ChainForces:
             a_frame = (acc + cross(alpha, r) + cross(w, cross(w, r))
                        + 2 * cross(w, v_rel))
             f_b[moving] -= self.lump_mass[child][:, None] * a_frame
+            # (about each plane's own normal: kept out of t_b, which must be
+            # the same in both planes of a bone for _turning)
             n_world = apply(fr[moving], self.body_n[moving])
-            t_b[moving] -= (self.i_n[moving] * (alpha * n_world).sum(1))[:, None] * n_world
+            spin[moving] = -self.i_n[moving] * (alpha * n_world).sum(1)
         self._recoil(pose)
         f_loc = apply_transposed(fr, f_b)
         t_loc = apply_transposed(fr, t_b)
@@ -123,7 +126,7 @@ class ChainForces:
         rel = self._bending_velocity(decay)
         fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * rel[:, 0]
         fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * rel[:, 1]
-        tz = self._turning(pose, f_b, t_b, f_loc, t_loc) - decay * self.i_eff * rel[:, 2]
+        tz = self._turning(pose, f_b, t_b, f_loc, t_loc) + spin - decay * self.i_eff * rel[:, 2]
         out = self.force_rows
         out[:] = 0.0
         live = self.in_space
