@@ -96,7 +96,7 @@ class ChainForces:
         fr = pose["frame_rot"][bb]
         frame = self.bone_frame[bb]
         moving = (frame >= 0) & ~self.in_debris[bb]
-        spin = np.zeros(len(bb))  # N m: the frame's angular acceleration's, on each body
+        spin = np.zeros(len(bb))  # N m: each body's rotary d'Alembert torque, about its normal
         if prev is not None and moving.any():
             # d'Alembert forces of the parent bone's accelerating frame, from
             # the motion of its own COM (a material point: the lumped COG
