@@ -203,7 +203,6 @@ def test_the_loads_do_the_same_work_on_the_two_planes_as_on_the_pose(tmp_path):
     # every pivot at the tip of the body before it
     for i, body in enumerate(tier.bodies):
         body.angle = angle[i]
-        body.angular_velocity = rate[i]
         j = tier.prev_body[i]
         if j < 0:
             origin, v_origin = tuple(tier.q0[i]), (0.0, 0.0)

@@ -194,6 +194,13 @@ class ChainForces:
                        + sn * (sx * gx + sy * gy + ax * fx + ay * fy))
         return turn
 
+    def _layout_key(self) -> tuple[int, ...]:
+        """What the chains' layout is taken at: counts of live pivots, debris
+        bones, rows and planes, each of which only ever moves one way, so
+        any break, part or plane gone changes it."""
+        return (int(self.pivot_alive.sum()), int(self.in_debris.sum()),
+                int(self.row_start.sum()), int(self.planes_of_bone.sum()))
+
     def _bent_rows(self) -> tuple | None:
         """The rows that bend in two planes (None: none): their bones, each
         row's in chain order; the index of the row each is in; each one's
@@ -202,8 +209,7 @@ class ChainForces:
         tip) and COG arms in the plane. Bones gone to debris are left out
         (they end their rows). Kept until a joint, a part or a plane goes
         (a part's going moves its carriers' COGs)."""
-        key = (int(self.pivot_alive.sum()), int(self.in_debris.sum()),
-               int(self.row_start.sum()), int(self.planes_of_bone.sum()))
+        key = self._layout_key()
         if self.bent is not None and self.bent[0] == key:
             return self.bent[1]
         bones, row = [], []
@@ -305,8 +311,7 @@ class ChainForces:
         gone): per bone, the index of its piece (-1: none); and the pieces'
         bodies, the group (a piece in one plane) of each, and the piece of
         each group. Kept until a joint or a part goes."""
-        key = (int(self.pivot_alive.sum()), int(self.in_debris.sum()),
-               int(self.row_start.sum()))
+        key = self._layout_key()
         if self.free_pieces is not None and self.free_pieces[0] == key:
             return self.free_pieces[1:]
         piece_of = np.full(self.n, -1)
