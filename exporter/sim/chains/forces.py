@@ -476,8 +476,9 @@ class ChainForces:
             return out
         touching, _ = self._touching(pose)
         if touching is not None:
-            owner, ends, radius, _, m_eff, _ = touching
-            np.add.at(out, owner, stored_energy(ends, radius, m_eff, self.contact_dt))
+            owner, ends, radius, vel, m_eff, _ = touching
+            np.add.at(out, owner, stored_energy(ends, vel[:, 2], radius, m_eff,
+                                                self.contact_dt))
         out[self.debris.bones] += self.debris.contact_energy()
         return out
 
