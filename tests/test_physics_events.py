@@ -353,6 +353,30 @@ def test_a_blast_breaks_as_many_twigs_on_the_lod_as_on_the_reference(root):
     assert abs(broken["planar"] - broken["full"]) <= 0.25 * broken["full"], broken
 
 
+@pytest.mark.slow
+def test_the_pymunk_tier_breaks_as_many_of_a_blasted_oaks_joints_as_the_fine_reference(root):
+    """The `explosion` preset's charge on its oak alone (10 kg of TNT 10 m
+    away), 0.3 s past the front. The reference breaks 2, 5 and 6 joints at
+    1/2000, 1/8000 and 1/16000 s (its twigs ring at up to 50 Hz and a
+    coarser step damps them). The LOD without MuJoCo broke 11: its frame
+    forces, held over 8.3 ms, reached the ringing twigs late. It updates
+    them every substep while the blast pushes and for BLAST_RING after,
+    and breaks 6 (the issue's bound: within 25 % of the reference)."""
+    pytest.importorskip("mujoco")
+    raw = {"duration": 1.3, "fps": 24,
+           "tree": [{"grammar": str(root / "grammars" / "oak.lsys"),
+                     "position": [-10.0, 0.0]}],
+           "explosion": [{"position": [0.0, 0.0, 1.0], "time": 1.0, "charge": 10.0}]}
+    scene = parse_scene(raw, file="<blast>")
+    broken = {}
+    for solver, quality, step in (("planar", replace(QUALITIES["default"], nonlinear="pymunk"),
+                                   None), ("full", None, 1 / 16000)):
+        b = bake_scene(scene, solver=solver, quality=quality, timestep=step)
+        broken[solver] = sum(e["kind"] == "broke" for e in b.trees[0].info["events"])
+    assert broken["full"] >= 4, broken  # the case still breaks joints
+    assert abs(broken["planar"] - broken["full"]) <= 0.25 * broken["full"], broken
+
+
 def test_a_tree_the_pymunk_tier_takes_during_a_blast_gets_the_whole_push(root):
     """Without MuJoCo the LOD hands a tree whose joint nears breaking to the
     pymunk tier, which carries a child chain's push to its parent only as a

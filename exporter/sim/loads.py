@@ -160,9 +160,10 @@ class SceneLoads:
         return out
 
     def blast_pushing(self, t: float, dt: float, com: np.ndarray, axis: np.ndarray,
-                      props: BoneProps) -> bool:
-        """Whether a blast pushes any of these bones within [t, t + dt] s."""
-        return meets(self.blast_windows(com, axis, props), t, dt)
+                      props: BoneProps, after: float = 0.0) -> bool:
+        """Whether a blast pushes any of these bones within [t, t + dt] s
+        (or pushed them within `after` s before)."""
+        return meets(self.blast_windows(com, axis, props), t, dt, after)
 
     def blasts_passed(self, t: float, com: np.ndarray, axis: np.ndarray,
                       props: BoneProps) -> bool:
