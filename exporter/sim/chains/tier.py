@@ -58,8 +58,7 @@ from ..audit import Ledger, LoadWork, bone_energy, per_tree
 from ..common import SimTree, TreeMotion, locate, sub_frame_samples
 from ..debris import Debris
 from ..events import TIER, Event
-from ..linear import (BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, hinges_from_pose,
-                      in_return_range)
+from ..linear import BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, hinges_from_pose, in_return_range
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
 from ..quality import Quality
