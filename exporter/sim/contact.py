@@ -8,11 +8,11 @@ and damping ratio 0.7, i.e. k = m_eff omega^2, c = 1.4 m_eff omega.
 
 The spring holds 1/2 k d d' while pressed in (`stored_energy`; d' the
 depth an update before): the energy audit counts it, as it counts the
-joints' springs, or a bounce that gives it back reads as energy made up. A point that starts deep (a limb that
-becomes debris where its chain's contact let it sink) is given that depth
-as an allowance (`Sunk`): the ground holds it there and pushes back only
-against further sinking, so a change of model never fires a spring that
-nothing compressed.
+joints' springs, or a bounce that gives it back reads as energy made up.
+A point that starts deep (a limb that becomes debris where its chain's
+contact let it sink) is given that depth as an allowance (`Sunk`): the
+ground holds it there and pushes back only against further sinking, so a
+change of model never fires a spring that nothing compressed.
 """
 
 from __future__ import annotations
