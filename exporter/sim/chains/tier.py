@@ -198,7 +198,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 # update at the substep rate; so too while a blast pushes
                 # (its capped push turns twigs within one 8 ms hold: the
                 # audit found 3 % of its work unexplained) and its twigs ring
-                ahead = 1 if (self.contact_active or self.recoiling or self._blast_pushing(t)
+                ahead = 1 if (self.contact_active or self.recoiling or self._blast_acting(t)
                               or self._projectile_near()) else self.update_every
                 self.forces(t, self.pose, self.prev,
                             max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
@@ -294,7 +294,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         """The bones' unit axes (B, 3) in `pose`."""
         return pose["vec"] / np.maximum(self.length, 1e-12)[:, None]
 
-    def _blast_pushing(self, t: float) -> bool:
+    def _blast_acting(self, t: float) -> bool:
         """Whether a blast pushes the tier's bones within the next update's
         hold, or pushed them within BLAST_RING s (SceneLoads.blast_pushing,
         at the current pose). While the twigs ring, frame forces held over
