@@ -20,7 +20,7 @@ bakes alone (independent of either solver's bookkeeping):
     python bench/events.py [--cases felling boxes explosion blast] [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
                            [--quality final]      # the LOD's level (default: the scene's)
-                           [--engine pymunk]      # the LOD's nonlinear engine without MuJoCo
+                           [--engine articulated] # the LOD's nonlinear engine without MuJoCo
 
 A blast on a sapling is the case to convergence-check (`--timestep`): the
 reference's peak twig moments ("closest to breaking", the largest moment /
@@ -138,14 +138,15 @@ def main() -> None:
                     help="the full reference's step, s (e.g. 1/64000; default: its own)")
     ap.add_argument("--quality", choices=list(QUALITIES), default=None,
                     help="the planar LOD's level (default: the scene's own)")
-    ap.add_argument("--engine", choices=["auto", "pymunk"], default="auto",
-                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed) or "
-                         "pymunk (what an install without the `reference` extra runs)")
+    ap.add_argument("--engine", choices=["auto", "articulated", "pymunk"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed), "
+                         "articulated (with pymunk for breaks, cuts and hits: what an install "
+                         "without the `reference` extra runs) or pymunk")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
     level = QUALITIES[args.quality] if args.quality else None
-    if args.engine == "pymunk":  # the presets' own level is `default`
-        level = dataclasses.replace(level or QUALITIES["default"], nonlinear="pymunk")
+    if args.engine != "auto":  # the presets' own level is `default`
+        level = dataclasses.replace(level or QUALITIES["default"], nonlinear=args.engine)
     step = float(args.timestep) if args.timestep else None
     rows = []
     for case in args.cases:

@@ -5,7 +5,7 @@ fraction of its energy and the work done on it; the bake warns past 2 %)
 and the joints broken.
 
     python bench/presets.py [--quality default] [--solver planar|full] [--only NAME ...]
-                            [--engine pymunk] [--json out/bench/presets.json]
+                            [--engine articulated] [--json out/bench/presets.json]
 
 Timings are from one run on a shared machine: compare ratios, not absolutes.
 """
@@ -32,8 +32,8 @@ from treebake.sim.quality import QUALITIES
 def bench(path: Path, quality: str | None, solver: str = "planar", engine: str = "auto") -> dict:
     scene = load_scene(path, {"quality": quality} if quality else None)
     level = None
-    if engine == "pymunk" and solver == "planar":
-        level = dataclasses.replace(scene.quality, nonlinear="pymunk")
+    if engine != "auto" and solver == "planar":
+        level = dataclasses.replace(scene.quality, nonlinear=engine)
     started = time.perf_counter()
     cpu = time.process_time()
     bake = bake_scene(scene, solver=solver, quality=level)
@@ -66,9 +66,10 @@ def main() -> None:
     ap.add_argument("--quality", choices=tuple(QUALITIES))
     ap.add_argument("--solver", choices=("planar", "full"), default="planar")
     ap.add_argument("--only", nargs="*", help="preset names")
-    ap.add_argument("--engine", choices=["auto", "pymunk"], default="auto",
-                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed) or "
-                         "pymunk (what an install without the `reference` extra runs)")
+    ap.add_argument("--engine", choices=["auto", "articulated", "pymunk"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed), "
+                         "articulated (with pymunk for breaks, cuts and hits: what an install "
+                         "without the `reference` extra runs) or pymunk")
     ap.add_argument("--json", default=str(ROOT / "out" / "bench" / "presets.json"))
     args = ap.parse_args()
     rows = []

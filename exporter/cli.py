@@ -768,10 +768,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="planar: the LOD; full: the MuJoCo reference; both (default)")
     p.add_argument("--quality", nargs="*", choices=("draft", "default", "final"),
                    help="the LOD's quality levels to run (default: all three)")
-    p.add_argument("--engine", choices=("auto", "pymunk"), default="auto",
+    p.add_argument("--engine", choices=("auto", "articulated", "pymunk"), default="auto",
                    help="the LOD's engine for what leaves its linear tier: auto (default: "
-                        "the reference when MuJoCo is installed) or pymunk (cuts too: what an "
-                        "install without the `reference` extra runs)")
+                        "the reference when MuJoCo is installed), articulated (with pymunk for "
+                        "breaks, cuts and hits: what an install without the `reference` extra "
+                        "runs) or pymunk (everything)")
     p.add_argument("--case", nargs="*", metavar="NAME",
                    help="only these cases (quote names with spaces): "
                         f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the long "

@@ -200,14 +200,18 @@ QUALITY = table(
         10.0, doc_default=_levels("relinearise")),
     Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
         "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
-        "installed, else pymunk; ground contact always pymunk, a cut as `cut_engine` says), "
-        "`reference` or `pymunk`", kind="choice", choices=("auto", "reference", "pymunk"),
+        "installed, ground contact then pymunk and a cut as `cut_engine` says; else "
+        "`articulated`), `reference`, `articulated` (large motion and ground contact in the "
+        "articulated tier, what may break, cuts and hits in pymunk) or `pymunk`",
+        kind="choice", choices=("auto", "reference", "articulated", "pymunk"),
         doc_default=_levels("nonlinear")),
     Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` "
         "(robust at any step) or `nonlinear` (the reference when installed)",
         kind="choice", choices=("pymunk", "nonlinear"), doc_default=_levels("cut_engine")),
     Key("reference_step", "the reference's step when it is the nonlinear engine", "s", None,
         1e-5, 1 / 60, doc_default=_levels("reference_step")),
+    Key("articulated_step", "the articulated tier's step (whole `substep_rate` steps)", "s",
+        None, 1e-5, 1 / 60, doc_default=_levels("articulated_step")),
     Key("substep_rate", "physics steps per second (split further, automatically, during "
         "blasts, hits and fast spins)", "Hz", None, 60.0, 100_000.0,
         doc_default=_levels("substep_rate")),

@@ -296,16 +296,17 @@ def measure(bake: Bake, quiet: float, event: bool = False) -> tuple[float, float
 def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -> Result:
     """Bake a case with a solver ("planar" at quality `level`, or "full").
     The planar LOD's `engine` for what leaves its linear tier: "auto" (the
-    reference when MuJoCo is installed) or "pymunk" (cuts too: what an
-    install without the `reference` extra runs)."""
+    reference when MuJoCo is installed), "articulated" (with the pymunk tier
+    for breaks, cuts and hits: what an install without the `reference`
+    extra runs) or "pymunk" (cuts too)."""
     raw = dict(case.scene, duration=case.duration, fps=24.0, name=case.name)
     label = f"planar {level}" if solver == "planar" else solver
     quality = None
     if solver == "planar":
         quality = QUALITIES[level]
-        if engine == "pymunk":
-            quality = replace(quality, nonlinear="pymunk")  # cuts follow it (cut_engine)
-            label += " pymunk"
+        if engine in ("articulated", "pymunk"):
+            quality = replace(quality, nonlinear=engine)  # cuts follow it (cut_engine)
+            label += f" {engine}"
     start = time.perf_counter()
     try:
         from tempfile import TemporaryDirectory

@@ -48,6 +48,10 @@ from .solver import SolveResult, frame_timing
 # by that; at 960 and 60 Hz 1.4 %, at 960 and 120 Hz 0.7 %
 HIT_SUBSTEP_RATE = 960.0
 HIT_FORCE_RATE = 120.0
+# what the articulated tier takes (linear.HandOff kinds): large motion and
+# tips at the ground; a joint near breaking, a cut and projectiles need the
+# pymunk tier's breaks, debris and hits
+ARTICULATED_KINDS = ("turn", "cone", "ground")
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
 
@@ -75,6 +79,7 @@ class ChunkResult:
     objects: tuple | None = None  # projectile tracks (shapes, sizes, positions, rotations)
     reference: list = field(default_factory=list)  # SolveResults of the reference's runs
     came_back: list = field(default_factory=list)  # (time s, tree): back to the linear tier
+    articulated: list = field(default_factory=list)  # SolveResults of the articulated tier's runs
 
 
 def chunks(trees: list[SimTree], qualities: list[Quality],
@@ -119,7 +124,12 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         0.56 % at about the same cost; a crate smashes the sapling as in the
         truth, where the planar chains lost one twig), and where a blast
         breaks branches the planar chains gained 0.1-3 % of energy the loads
-        did not supply (sapling, 6-15 kg at 3-5 m), the reference none."""
+        did not supply (sapling, 6-15 kg at 3-5 m), the reference none.
+        The articulated tier (no MuJoCo) takes large motion and tips at
+        the ground, in the same coordinates; what may break or is cut, and
+        trees a projectile can reach, go to the pymunk tier."""
+        if engine == "articulated":
+            return "articulated" if kind in ARTICULATED_KINDS else "pymunk"
         if engine == "reference" and quality.nonlinear == "auto" and \
                 kind not in ("turn", "cone", "break", "projectile") and \
                 not (kind == "cut" and quality.cut_engine == "nonlinear"):
@@ -154,7 +164,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         tier.begin()
         pym.append((tier, first))
     elif first:
-        ref_runs.append((first, 0.0, None, None, 0.0))
+        ref_runs.append((first, 0.0, None, None, 0.0, "reference"))
     uses = [TierUse(engine_for("projectile") if p else "linear") for p in in_nonlinear]
 
     def pymunk_from(group: list[tuple[int, HandOff, HandOff]],
@@ -202,8 +212,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 linear_work[i] = start.work
                 if to == "pymunk":
                     to_pymunk.setdefault(start.substep, []).append((i, ho, start))
-                else:  # the reference's hinges are the linear tier's coordinates
-                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, ho.work))
+                else:  # its hinges are the linear tier's coordinates
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, ho.work, to))
             for group in to_pymunk.values():
                 pym.append(pymunk_from(group, f))
         for tier, _ in pym:
@@ -280,7 +290,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                         p_tier.advance_frame(ff)
                     later.append((p_tier, [i], work))
                 else:
-                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, work))
+                    ref_runs.append(([i], ho.time, (ho.q, ho.v), ho, work, to))
         return tier, later
 
     objects = None
@@ -298,14 +308,50 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             pym.append((p_tier, p_members))
             take_pymunk(p_tier, p_members, [p_work])
 
+    articulated_results: list[SolveResult] = []
+
+    def articulated_run(i: int, ho: HandOff, work_before: float) -> None:
+        """Tree i in the articulated tier from its hand-over `ho` (J done on
+        it before: `work_before`), to the end, back to the linear tier or
+        on to the pymunk tier (from where a blast under way found it)."""
+        from .articulated import ArticulatedTier  # numba, loaded when a tree first needs it
+
+        tier = ArticulatedTier([trees[i]], scene, quality, loads, log=log)
+        # the linear tier's snapshot counts its work from that tier's start
+        since = work_before - ho.work
+        before = None if ho.before_blast is None else \
+            replace(ho.before_blast, work=since + ho.before_blast.work)
+        result = tier.run(ho.time, (ho.q, ho.v), ho.step_length, before, work_before)
+        articulated_results.append(result)
+        take(i, result.motions[trees[i].name], tier.first_frame, work_before)
+        if result.handed_back is not None:
+            back_to_linear(i, *result.handed_back)
+            return
+        on = result.handed_on
+        if on is None:
+            return
+        start = on.before_blast if on.before_blast is not None else on
+        reason = on.reason if start is on else \
+            f"{on.reason} at {on.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+        uses[i] = TierUse(f"{uses[i].tier}, then pymunk", uses[i].switch,
+                          f"{uses[i].reason}; to pymunk at {start.time:.3f} s: {reason}")
+        handed.append(Event(start.time, trees[i].name, TIER, "", f"to pymunk: {reason}"))
+        log(f"t = {on.time:.3f} s: {trees[i].name} leaves the articulated tier ({reason})")
+        p_tier, _ = pymunk_from([(i, on, start)], frames)
+        pym.append((p_tier, [i]))
+        take_pymunk(p_tier, [i], [start.work])
+
     k = 0
     # trees given back may leave again: returns and reference runs are appended
     while returns or k < len(ref_runs):
         if returns:
             back_to_linear(*returns.pop(0))
             continue
-        members, t0, state, ho, work_before = ref_runs[k]
+        members, t0, state, ho, work_before, to = ref_runs[k]
         k += 1
+        if to == "articulated":
+            articulated_run(members[0], ho, work_before)
+            continue
         from .reference import ReferenceSolver
 
         ref = ReferenceSolver([trees[i] for i in members], scene, quality, loads, log=log,
@@ -364,14 +410,14 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
                 for tier, members in pym)
     if lin is not None:
         steps += sum(trees[i].rig.model.n_segments for i in lin_idx) * lin.stats.steps
-    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats)
+    steps += sum(r.timing.get("segment_steps", 0) for r in ref_stats + articulated_results)
     steps += sum(trees[i].rig.model.n_segments * st.steps for _, i, st in returned)
     linear = ([lin.stats] if lin is not None else []) + [st for _, _, st in returned]
     return ChunkResult(motions, stats, linear, uses, h,
                        pym_h.dt_update if pym_h is not None else h,
                        lin.h if lin is not None else None,
                        sum(t.rig.model.n_segments for t in trees), steps, objects, ref_stats,
-                       [(t, trees[i].name) for t, i, _ in returned])
+                       [(t, trees[i].name) for t, i, _ in returned], articulated_results)
 
 
 def simulate(trees: list[SimTree], qualities: list[Quality], scene: Scene, extent: np.ndarray,
@@ -482,14 +528,26 @@ class PlanarLOD:
             for i, use in zip(members, c.tiers):
                 tiers[self.trees[i].name] = use.tier if use.switch is None else \
                     f"{use.tier} at {use.switch:.3f} s ({use.reason})"
-        notes = lod_notes(st, lin, quality, meta["substep"])
-        fallback = sum("pymunk" in use.tier for c in chunks for use in c.tiers)
+        arts = [r for c in chunks for r in c.articulated]
+        # the articulated tier's capped loads join the others' note
+        capped = [Stats(limited=r.meta["stats"]["limited"],
+                        first_limit=r.meta["stats"]["first_limit"])
+                  for r in arts if r.meta["stats"]["limited"]]
+        notes = lod_notes(st, lin, quality, meta["substep"], capped)
+        fallback = sum(("pymunk" in use.tier or "articulated" in use.tier)
+                       for c in chunks for use in c.tiers)
         if fallback and quality.tier == "auto" and quality.nonlinear == "auto" \
                 and not quality_levels.reference_available():
-            notes.append(f"nonlinear engine: pymunk for {fallback} tree"
-                         f"{'s' if fallback > 1 else ''}, as MuJoCo is not installed "
+            notes.append(f"nonlinear engines: the articulated tier and pymunk for {fallback} "
+                         f"tree{'s' if fallback > 1 else ''}, as MuJoCo is not installed "
                          "(pip install 'treebake[reference]': the reference, more accurate "
-                         "for large motion, hits and felling)")
+                         "for breaking, hits and felling)")
+        if arts:
+            meta["articulated_runs"] = len(arts)
+            meta["articulated_step"] = min(r.meta["step"] for r in arts)
+            for key in ("steps", "split", "updates"):
+                stats[f"articulated_{key}"] = sum(r.meta["stats"][key] for r in arts)
+            notes += list(dict.fromkeys(n for r in arts for n in r.notes))
         refs = [r for c in chunks for r in c.reference]
         back = sorted(b for c in chunks for b in c.came_back)
         stats["returned"] = len(back)
@@ -516,10 +574,10 @@ class PlanarLOD:
             notes += free_part_notes({k: sum(r.meta["stats"][k] for r in refs)
                                       for k in FREE_PART_COUNTS})
         step = (sum(s.step_seconds for s in lin) + st.step_seconds
-                + sum(r.timing.get("step_seconds", 0.0) for r in refs))
+                + sum(r.timing.get("step_seconds", 0.0) for r in refs + arts))
         update = (sum(s.update_seconds for s in lin) + st.update_seconds
                   + sum(r.timing.get("update_seconds", 0.0) + r.timing.get("compile_seconds", 0.0)
-                        for r in refs))
+                        for r in refs + arts))
         frame_seconds = np.zeros(scene.frame_count - 1)
         for s in [st, *lin]:
             if len(s.frame_seconds):  # a pymunk tier started late covers the last frames
@@ -542,14 +600,16 @@ def chunks_plan(trees: list[SimTree], qualities: list[Quality], scene: Scene):
     return chunks(trees, qualities, whole=bool(scene.projectiles))
 
 
-def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: float) -> list[str]:
-    """What the planar LOD adapted or clamped, in words (never silently)."""
+def lod_notes(stats: Stats, linear: list[LinearStats], quality: Quality, h: float,
+              capped: list[Stats] = ()) -> list[str]:
+    """What the planar LOD adapted or clamped, in words (never silently);
+    `capped`: the other tiers' counts of capped loads."""
     notes = []
     if stats.inertia_floored:
         notes.append(f"stability: rotary inertia raised on {stats.inertia_floored} of "
                      f"{stats.bodies} pymunk bodies (up to {stats.max_inertia_ratio:.1f}x) to "
                      f"keep omega*h <= {quality.stability:g} at h = {h * 1e3:.3f} ms")
-    limited = [s for s in [stats, *linear] if s.limited]
+    limited = [s for s in [stats, *linear, *capped] if s.limited]
     if limited:
         first = min(limited, key=lambda s: s.first_limit[2])
         merged = Stats(limited=sum(s.limited for s in limited), first_limit=first.first_limit)

@@ -34,8 +34,10 @@ class Quality:
     # trees' mean pose once a bone of it has turned this far from the pose they were taken at
     tier: str = "auto"  # "auto": linear, nonlinear engine when needed; "pymunk": pymunk only
     nonlinear: str = "auto"  # trees that leave the linear range: "reference" (MuJoCo,
-    # when installed: "auto") or "pymunk"
+    # when installed: "auto"), "articulated" (else: "auto"; the pymunk tier for
+    # what may break, cuts and hits) or "pymunk"
     reference_step: float = 1 / 480  # s, the reference's step when it is the nonlinear engine
+    articulated_step: float = 1 / 480  # s, the articulated tier's step (articulated.py)
     cut_engine: str = "pymunk"  # under nonlinear "auto", the engine for a felled tree:
     # "pymunk" (robust at any step) or "nonlinear" (the nonlinear engine)
 
@@ -48,15 +50,16 @@ def reference_available() -> bool:
 
 
 def nonlinear_engine(quality: Quality) -> str:
-    """The engine for trees that leave the linear range: "reference" or "pymunk"."""
+    """The engine for trees that leave the linear range: "reference",
+    "articulated" (with the pymunk tier for breaks, cuts and hits) or "pymunk"."""
     if quality.nonlinear == "auto":
-        return "reference" if reference_available() else "pymunk"
+        return "reference" if reference_available() else "articulated"
     return quality.nonlinear
 
 
 QUALITIES = {
     "draft": Quality("draft", 480.0, 60.0, 8, 2, 1 / 12, linear_rate=24.0,
-                     reference_step=1 / 240),
+                     reference_step=1 / 240, articulated_step=1 / 240),
     "default": Quality("default", 960.0, 120.0, 10, 2, 0.0, linear_rate=24.0,
                        reference_step=1 / 480),
     # a felled tree at `final` goes to the reference (when installed): at 1/1000 s it
@@ -64,5 +67,5 @@ QUALITIES = {
     # coupling makes 1.7 % of a sapling's (docs/physics.md), in 0.2-1.1x its time
     # (3.2-3.7x on the willow, whose 1,328 broken parts are free bodies in contact)
     "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.2,
-                     reference_step=1 / 1000, cut_engine="nonlinear"),
+                     reference_step=1 / 1000, articulated_step=1 / 960, cut_engine="nonlinear"),
 }

@@ -19,7 +19,8 @@ class SolveResult:
     solver or tier moved it (and when it switched); `timing`: seconds and
     per-frame costs, never in the bake file. `handed_back`: where a run
     for the planar LOD stopped because its trees went back to the linear
-    tier: (frame, hinge angles (2B,) rad, rates (2B,) rad/s), else None."""
+    tier: (frame, hinge angles (2B,) rad, rates (2B,) rad/s), else None;
+    `handed_on` likewise where it stopped for the pymunk tier."""
 
     motions: dict[str, TreeMotion]
     objects: object | None = None
@@ -28,6 +29,8 @@ class SolveResult:
     tiers: dict[str, str] = field(default_factory=dict)
     timing: dict = field(default_factory=dict)
     handed_back: tuple | None = None
+    handed_on: object | None = None  # linear.HandOff: where the articulated tier's run stopped
+    # for an event only the pymunk tier handles (a joint near breaking, the ground, a cut)
 
 
 class Solver(Protocol):

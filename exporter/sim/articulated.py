@@ -1,0 +1,449 @@
+"""The articulated tier: the planar LOD's engine for trees in large motion
+where MuJoCo is not installed.
+
+A tree that leaves the linear tier for large motion (a bone turned past
+linear.MAX_TURN, a hinge near its cone) comes here with its hinge angles and
+rates, the linear tier's and the reference's coordinates, so the switch is
+exact. Its bones are one articulated body, stepped with Featherstone's
+algorithm (featherstone.py): every child pushes back on its parent, where
+the pymunk tier's chains carry their children as rigid lumps (one-way
+coupling, docs/physics.md), whose unpaid power m v_frame . a_rel was the
+last source of unexplained energy on a blasted sapling.
+
+Model (the reference's, reference.py): two hinges per joint, each with the
+rig's stiffness k and the prestress that makes the grown shape the
+equilibrium under gravity; structural damping -rate M_LL qd_L on each limb's
+own hinges, rate = (1 - exp(-alpha h)) / h; a hinge past its cone meets a
+critically damped spring (CONE_OMEGA against the joint's articulated
+inertia). Loads (air, blasts, attractors, pulls) are world forces at the
+bones' COMs, evaluated at FORCE_RATE at least (every step at 1/480 s) and
+held; while a blast pushes or its twigs ring (linear.BLAST_RING) the step is
+split to at most BLAST_STEP with the loads evaluated every part, as the
+reference's. The ground pushes on the tips in it (contact.py's penalty
+springs, tuned to each bone's own free-body mass at the tip, a lower bound
+of what the tree presents there, so they hold at the step).
+
+Step: semi-implicit Euler (velocity, then angle) at `articulated_step`,
+with the springs implicit in each hinge's own coordinate (an armature
+h^2 k in the algorithm's joint inertia): a joint is stable at any step
+against all it carries, so no rotary inertia is raised, and the step damps
+a mode of f Hz by about pi f h, as MuJoCo's stiffness-implicit step.
+
+A tree leaves for the pymunk tier (which breaks joints and fells) when a
+joint's bending moment passes linear.BREAK_MARGIN of its strength or its
+felling cut comes: `handed_on`, a linear.HandOff (from where a blast under
+way found the tree, as the linear tier's). It goes back to the linear tier
+once it has stayed in that tier's range for linear.RETURN_WINDOW, as from
+the reference.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..rotations import quaternions_from_matrices
+from ..scene import Scene
+from .audit import Ledger, LoadWork, bone_energy
+from .common import Bones, SimTree, TreeMotion, cap_loads, locate, sub_frame_samples
+from .contact import effective_mass, ground_forces, stored_energy
+from .events import TIER, Event
+from .featherstone import accelerations, kinematics
+from .layout import ChainLayout
+from .linear import (
+    BLAST_RING,
+    BREAK_MARGIN,
+    RETURN_DETAIL,
+    RETURN_WINDOW,
+    HandOff,
+    in_return_range,
+)
+from .loads import SceneLoads, meets
+from .quality import Quality
+from .solver import SolveResult, frame_timing
+
+# A hinge past its cone meets a critically damped spring of this natural
+# frequency against the joint's articulated inertia, taken implicitly. The
+# reference's cones are MuJoCo's soft limits, which also cancel most of what
+# pushes into them; a conifer 5 m from 50 kg of TNT (no ground, 4 s) was off
+# the reference at 1/2000 s by at most 3.2 % of its height at 52.6 rad/s
+# (MuJoCo's own spring: solref 0.02 s, impedance 0.95), 1.4 % at 150,
+# 0.95 % at 400 and 1.2 % at 1000 rad/s (the MuJoCo engine: 1.1 %)
+CONE_OMEGA = 400.0  # rad/s
+CONE_DAMPING = 1.0  # damping ratio
+FORCE_RATE = 500.0  # Hz, at least: the loads' updates (the reference's rate)
+BLAST_STEP = 1 / 2000  # s: the most a step lasts while a blast pushes or rings (the reference's)
+
+
+@dataclass
+class ArticulatedStats:
+    """What a run did (deterministic: no timings)."""
+
+    steps: int = 0
+    split: int = 0  # steps split while a blast pushed or rang
+    updates: int = 0  # load evaluations
+    limited: int = 0  # bone updates whose load was capped (common.cap_loads)
+    first_limit: tuple | None = None  # (tree, segment, time s, m/s^2)
+
+
+class ArticulatedTier:
+    """Trees (handed over by the linear tier) stepped as articulated bodies."""
+
+    def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
+                 log=None):
+        self.trees, self.scene, self.quality, self.loads = trees, scene, quality, loads
+        self.log = log or (lambda msg: None)
+        b = self.bones = Bones.of(trees)
+        nb = self.n = b.n
+        if np.any(b.parent >= np.arange(nb)):
+            raise AssertionError("bones must come after their parents")  # pragma: no cover
+        layout = ChainLayout.of(trees, b.offsets, b.pivot0, b.tip0)
+        nd = 2 * nb
+        self.dof_parent = np.empty(nd, dtype=np.int64)
+        self.dof_parent[0::2] = np.where(b.parent >= 0, 2 * b.parent + 1, -1)
+        self.dof_parent[1::2] = np.arange(0, nd, 2)
+        frame = np.repeat(layout.bone_frame, 2)
+        self.frame_dof = np.where(frame >= 0, 2 * frame + 1, -1)
+        chain = np.repeat(layout.bone_chain, 2)
+        self.same_limb = (self.dof_parent >= 0) & (chain == chain[np.maximum(self.dof_parent, 0)])
+        self.rest_axis = np.ascontiguousarray(b.hinges.reshape(nd, 3))
+        self.com_arm0 = b.com0 - b.pivot0
+        self.k = np.repeat(b.k, 2).astype(float)
+        self.cone = np.repeat(b.cone, 2).astype(float)
+        self.alpha = np.repeat(b.alpha, 2).astype(float)
+        self.tip_arm = b.tip0 - b.pivot0
+        # a tip's contact sphere never reaches below where it grew (chains/forces.py)
+        self.contact_radius = np.minimum(b.radius, np.maximum(b.tip0[:, 2], 0.0))
+        self.least_inertia = np.linalg.eigvalsh(b.inertia)[:, 0]
+        # a frame is a whole number of steps (a hand-on starts the pymunk
+        # tier at the substep nearest its time)
+        self.spf = max(1, round(1.0 / (scene.fps * quality.articulated_step)))
+        self.h = 1.0 / (scene.fps * self.spf)
+        self.contact_h = self.h  # s, the hold the ground's springs were last set for
+        self.force_every = max(1, math.floor(1.0 / (self.h * FORCE_RATE)))
+        self.blast_windows = [loads.blast_windows(b.com0[lo:hi], self.tip_arm[lo:hi]
+                                                  / np.maximum(b.length[lo:hi], 1e-12)[:, None],
+                                                  b.props.take(slice(lo, hi)))
+                              for lo, hi in zip(b.offsets[:-1], b.offsets[1:])]
+        self.cut_time = np.array([t.cut.time if t.cut is not None else np.inf for t in trees])
+        self.stats = ArticulatedStats()
+        self.timing = {"step_seconds": 0.0, "update_seconds": 0.0}
+        self._buffers()
+        self.q, self.qd = np.zeros(nd), np.zeros(nd)
+        self._kinematics()
+        # the prestress: the grown shape is the equilibrium under gravity
+        self.hold = self._gravity_torque() if scene.prestress else np.zeros(nd)
+
+    # ------------------------------------------------------------------
+    # state
+
+    def _buffers(self) -> None:
+        nb, nd = self.n, 2 * self.n
+        self.rot = np.zeros((nd, 3, 3))
+        self.pivot = np.zeros((nd, 3))
+        self.com = np.zeros((nb, 3))
+        self.inertia = np.zeros((nb, 3, 3))
+        self.axis = np.zeros((nd, 6))
+        self.vel = np.zeros((nd, 6))
+        self.bias = np.zeros((nd, 6))
+        self.work_arrays = (np.zeros((nd, 6, 6)), np.zeros((nd, 6)), np.zeros((nd, 6, 6)),
+                            np.zeros((nd, 6)))
+        self.qdd = np.zeros(nd)
+        self.cone_stiffness = np.zeros(nd)  # N m/rad, the cones' as the last step set them
+
+    def _kinematics(self) -> None:
+        b = self.bones
+        kinematics(self.q, self.qd, self.dof_parent, self.rest_axis, b.parent, b.pivot0,
+                   self.com_arm0, b.inertia, self.rot, self.pivot, self.com, self.inertia,
+                   self.axis, self.vel, self.bias)
+
+    def _gravity_torque(self) -> np.ndarray:
+        """Gravity's torque (D,) N m on each hinge in the current pose."""
+        b = self.bones
+        sub_m = b.mass.copy()
+        sub_mc = b.mass[:, None] * self.com
+        for i in range(self.n - 1, -1, -1):
+            p = b.parent[i]
+            if p >= 0:
+                sub_m[p] += sub_m[i]
+                sub_mc[p] += sub_mc[i]
+        bone = np.repeat(np.arange(self.n), 2)
+        lever = sub_mc[bone] - sub_m[bone][:, None] * self.pivot
+        return (self.axis[:, :3] * np.cross(lever, self.loads.g)).sum(1)
+
+    def bone_rot(self) -> np.ndarray:
+        return self.rot[1::2]
+
+    def bone_pivot(self) -> np.ndarray:
+        return self.pivot[1::2]
+
+    def omega(self) -> np.ndarray:
+        return self.vel[1::2, :3]
+
+    def vcom(self) -> np.ndarray:
+        v = self.vel[1::2]
+        return v[:, 3:] + np.cross(v[:, :3], self.com)
+
+    def _axes(self) -> np.ndarray:
+        a = np.einsum("bij,bj->bi", self.bone_rot(), self.tip_arm)
+        return a / np.maximum(self.bones.length, 1e-12)[:, None]
+
+    def moments(self) -> np.ndarray:
+        """Bending moment (B,) N m at each joint: springs and cones (as the
+        last step stiffened them)."""
+        mom = self.k * self.q + self.hold + self.cone_stiffness * self.past_cone()
+        return np.sqrt((mom.reshape(-1, 2) ** 2).sum(1))
+
+    def energy(self) -> np.ndarray:
+        """Per bone (B,) J: kinetic, gravitational (above z = 0), springs and cones."""
+        b = self.bones
+        e = bone_energy(b.mass, b.inertia, self.bone_rot(), self.com, self.vcom(), self.omega(),
+                        -self.loads.g[2])
+        mom = self.k * self.q + self.hold
+        past = self.past_cone()
+        spring = 0.5 * mom * mom / self.k + 0.5 * self.cone_stiffness * past * past
+        return e + spring.reshape(-1, 2).sum(1)
+
+    # ------------------------------------------------------------------
+    # stepping
+
+    def step(self, h: float, force: np.ndarray) -> None:
+        """One step of h s under world forces (B, 3) N at the COMs (and the
+        ground's at the tips in it, evaluated now)."""
+        torque = np.zeros((self.n, 3))
+        contact = self._contact(h)
+        if contact is not None:
+            bones, arm, push = contact
+            force = force.copy()
+            np.add.at(force, bones, push)
+            np.add.at(torque, bones, np.cross(arm, push))
+        q, qd, k = self.q, self.qd, self.k
+        tau = -k * (q + h * qd) - self.hold
+        armature = h * h * k
+        past = self.past_cone()
+        rate = np.where(self.alpha > 0, -np.expm1(-self.alpha * h) / h, 0.0)
+        accelerations(self.dof_parent, self.frame_dof, self.same_limb, self.bones.mass, self.com,
+                      self.inertia, self.axis, self.vel, self.bias, force, torque, tau, armature,
+                      rate, self.loads.g, qd, past, h, CONE_OMEGA, CONE_DAMPING,
+                      self.cone_stiffness, *self.work_arrays, self.qdd)
+        self.qd = qd + h * self.qdd
+        self.q = q + h * self.qd
+        self._kinematics()
+
+    def _touching(self):
+        """The bones whose tips are in the ground: their indices, tip
+        points, arms from their COMs (m), the tips' velocities (m/s),
+        contact radii (m) and effective masses (kg; contact.effective_mass,
+        the bone alone and free: below what the tree presents, so a spring
+        tuned to it holds at the step), or None."""
+        if not self.scene.ground:
+            return None
+        tip_z = self._tips_z()
+        near = np.nonzero(tip_z < self.contact_radius)[0]
+        if not len(near):
+            return None
+        rot = self.bone_rot()[near]
+        tips = self.bone_pivot()[near] + np.einsum("bij,bj->bi", rot, self.tip_arm[near])
+        arm = tips - self.com[near]
+        vel = self.vcom()[near] + np.cross(self.omega()[near], arm)
+        m_eff = effective_mass(self.bones.mass[near], self.least_inertia[near], arm)
+        return near, tips, arm, vel, self.contact_radius[near], m_eff
+
+    def _contact(self, h: float):
+        """The ground's forces (N) on the tips in it, for a step of h s:
+        (bones, arms from their COMs (m), forces), or None."""
+        touching = self._touching()
+        if touching is None:
+            return None
+        bones, tips, arm, vel, radius, m_eff = touching
+        self.contact_h = h
+        return bones, arm, ground_forces(tips, vel, radius, m_eff, h)
+
+    def contact_energy(self) -> float:
+        """What the ground's springs hold (J; contact.stored_energy)."""
+        touching = self._touching()
+        if touching is None:
+            return 0.0
+        _, tips, _, vel, radius, m_eff = touching
+        return float(stored_energy(tips, vel[:, 2], radius, m_eff, self.contact_h).sum())
+
+    def past_cone(self) -> np.ndarray:
+        """How far (D,) rad each hinge is past its cone (0 within it)."""
+        return np.where(np.abs(self.q) > self.cone, self.q - np.sign(self.q) * self.cone, 0.0)
+
+    # ------------------------------------------------------------------
+    # the run
+
+    def run(self, start: float, state: tuple[np.ndarray, np.ndarray],
+            hand_back: float | None = None, before_blast: HandOff | None = None,
+            work_start: float = 0.0) -> SolveResult:
+        """Simulate from `start` s (rounded to a step) and hinge angles and
+        rates `state` (q, v: (2B,) rad, rad/s from the grown shape), with
+        `work_start` J done on the tree before. Frames before are left zero.
+        With `hand_back` (the linear tier's step, s) the run stops once the
+        tree has stayed in the linear range for RETURN_WINDOW: the result's
+        `handed_back` is (frame, q, v) there. When an event needs the pymunk
+        tier, it stops there: `handed_on` is a HandOff (work: J since the
+        bake's start; from `before_blast` if a blast under way found the
+        tree before this tier took it)."""
+        (tree,) = self.trees  # lod.py gives each run one tree
+        scene, h, spf = self.scene, self.h, self.spf
+        frames = scene.frame_count
+        steps = (frames - 1) * spf
+        n = self.n
+        quats, pivots = np.zeros((frames, n, 4)), np.zeros((frames, n, 3))
+        self.ledger = Ledger(frames, 1)
+        load_work = LoadWork()
+        events: list[Event] = []
+        extra: list[list] = [[]]
+        samples: list = []
+        first = min(round(start / h), steps)
+        self.q, self.qd = state[0].astype(float).copy(), state[1].astype(float).copy()
+        self._kinematics()
+        self.returning = 0.0
+        self.before_blast = before_blast
+        handed_on = back = None
+        force = np.zeros((n, 3))
+        blast = False
+        frame_seconds = []
+        t_frame = time.perf_counter()
+        for step in range(first, steps + 1):
+            t = step * h
+            t0 = time.perf_counter()
+            if step % spf == 0:
+                f = step // spf
+                self._record(f, quats, pivots, load_work)
+                if f > first // spf:
+                    sub_frame_samples(quats[f - 1], quats[f], samples, self.bones.offsets, extra)
+                    frame_seconds.append(time.perf_counter() - t_frame)
+                    t_frame = time.perf_counter()
+                samples = []
+                if step == steps:
+                    break
+                if hand_back is not None and self._back_in_range(t, hand_back):
+                    back = (f, self.q.copy(), self.qd.copy())
+                    events.append(Event(t, tree.name, TIER, "", RETURN_DETAIL))
+                    break
+            elif step % self.force_every == 0:
+                samples.append((t, self.bone_rot().copy(), self.bone_pivot().copy()))
+            leaving = self._leaving(t)
+            if leaving is not None:
+                handed_on = self._hand_off(t, *leaving, hand_back, work_start)
+                break
+            if step % self.force_every == 0 or step == first:
+                # held until the next update (the first one, to the interval's end)
+                hold = (self.force_every - step % self.force_every) * h
+                blast = any(meets(w, t, hold, BLAST_RING) for w in self.blast_windows)
+                self._keep_before_blast(t, blast, hand_back, work_start)
+                if not blast:
+                    force = self._loads(t, hold, load_work)
+            t1 = time.perf_counter()
+            if blast:
+                parts = math.ceil(h / BLAST_STEP - 1e-9)
+                self.stats.split += 1
+                for k in range(parts):
+                    force = self._loads(t + k * h / parts, h / parts, load_work)
+                    self.step(h / parts, force)
+            else:
+                self.step(h, force)
+            self.stats.steps += 1
+            self.timing["update_seconds"] += t1 - t0
+            self.timing["step_seconds"] += time.perf_counter() - t1
+        motion = TreeMotion(quats, pivots, events, self.ledger.energy[:, 0],
+                            self.ledger.work[:, 0],
+                            np.array([e[0] for e in extra[0]]),
+                            np.array([e[1] for e in extra[0]]).reshape(-1, n, 4),
+                            np.array([e[2] for e in extra[0]]).reshape(-1, n, 3))
+        notes = []
+        st = self.stats
+        if st.split:
+            notes.append(f"articulated tier: steps split to at most {BLAST_STEP * 1e3:.4g} ms "
+                         f"while a blast pushed or its twigs rang (until {BLAST_RING:g} s after "
+                         f"its push), on {st.split} steps")
+        timing = {k: round(v, 3) for k, v in self.timing.items()}
+        timing.update(segment_steps=tree.rig.model.n_segments * st.steps,
+                      **frame_timing(frame_seconds, spf))
+        meta = {"step": h, "stats": {"steps": st.steps, "split": st.split, "updates": st.updates,
+                                     "limited": st.limited, "first_limit": st.first_limit}}
+        result = SolveResult({tree.name: motion}, None, meta, notes, {tree.name: "articulated"},
+                             timing, back, handed_on)
+        self.first_frame = math.ceil(first / spf - 1e-9)
+        return result
+
+    def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray, load_work: LoadWork) -> None:
+        quats[f] = quaternions_from_matrices(self.bone_rot())
+        pivots[f] = self.bone_pivot()
+        self.ledger.record(f, np.array([self.energy().sum() + self.contact_energy()]),
+                           np.array([load_work.pending(self.com).sum()]))
+
+    def _loads(self, t: float, hold: float, load_work: LoadWork) -> np.ndarray:
+        """World loads (B, 3) N at the COMs held for `hold` s from t, capped
+        (common.cap_loads), their work on the ledger."""
+        b = self.bones
+        force = self.loads.forces(t, self.com, self.vcom(), self._axes(), b.props,
+                                  include_gravity=False, dt=hold)
+        pulls = b.pull_forces(t)
+        if pulls is not None:
+            force += pulls
+        force = cap_loads(force, b.mass, t, self.stats, self.locate, self.loads.blast_capped)
+        self.ledger.add_work(np.array([load_work.update(force, self.com).sum()]))
+        self.stats.updates += 1
+        return force
+
+    def locate(self, bone: int) -> tuple[str, int]:
+        return locate(self.trees, self.bones.offsets, self.bones.bone_tree, bone)
+
+    def _tips_z(self) -> np.ndarray:
+        return self.bone_pivot()[:, 2] + np.einsum("bj,bj->b", self.bone_rot()[:, 2],
+                                                   self.tip_arm)
+
+    def _leaving(self, t: float) -> tuple[str, str] | None:
+        """(reason, kind) if an event needs the pymunk tier at t s, else None."""
+        b = self.bones
+        if self.cut_time[0] <= t + 0.5 * self.h:
+            return "its felling cut", "cut"
+        near = self.moments() > BREAK_MARGIN * b.strength
+        if not near.any():
+            return None
+        seg = self.locate(int(np.argmax(near)))[1]
+        path = self.trees[0].rig.model.segment_paths()[seg]
+        return f"{path}: a joint past {BREAK_MARGIN:.0%} of its strength", "break"
+
+    def _state(self, t: float, reason: str, kind: str, hand_back: float | None,
+               work_start: float) -> HandOff:
+        substep = round(t * self.quality.substep_rate)
+        return HandOff(0, substep, t, self.bone_rot().copy(), self.omega().copy(), self.q.copy(),
+                       self.qd.copy(), reason, kind, hand_back or 0.0,
+                       work_start + float(self.ledger.running[0]))
+
+    def _hand_off(self, t: float, reason: str, kind: str, hand_back: float | None,
+                  work_start: float) -> HandOff:
+        ho = self._state(t, reason, kind, hand_back, work_start)
+        ho.before_blast = self.before_blast
+        return ho
+
+    def _keep_before_blast(self, t: float, blast: bool, hand_back: float | None,
+                           work_start: float) -> None:
+        """The state a blast found the tree in, kept until BLAST_RING after its
+        push (linear.LinearTier._keep_before_blast: the pymunk tier starts a
+        tree handed on during a blast from there)."""
+        if not blast:
+            self.before_blast = None
+        elif self.before_blast is None:
+            self.before_blast = self._state(t, "as the blast reached it", "blast", hand_back,
+                                            work_start)
+
+    def _back_in_range(self, t: float, h_linear: float) -> bool:
+        """Whether the tree has stayed in the linear tier's range (with its
+        margin: linear.in_return_range) for RETURN_WINDOW s up to t, every
+        blast's push past."""
+        if not self.loads.blasts_passed(t, self.com, self._axes(), self.bones.props):
+            self.returning = 0.0
+            return False
+        ok = in_return_range(self.bones, self.bone_rot(), self.bone_pivot(), self.q, self.qd,
+                             self.moments(), h_linear)
+        self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
+        return self.returning >= RETURN_WINDOW - 1e-9
