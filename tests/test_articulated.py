@@ -204,3 +204,32 @@ def test_a_tree_near_breaking_goes_on_to_the_pymunk_tier_without_a_jump():
         f = round(e["time"] * bake.fps)
         around = np.median(step[f - 4:f + 4])
         assert step[f - 1:f + 1].max() < 1.5 * around, (e, step[f - 4:f + 4])
+
+
+def test_where_the_articulated_tier_fails_the_pymunk_tier_takes_the_tree(tmp_path, monkeypatch):
+    """A non-finite state (forced here) stops the articulated tier with a
+    SimulationError naming tree, segment and time, and the pymunk tier
+    takes the tree from the linear tier's hand-over: the bake completes."""
+    case = next(c for c in stress.cases(True) if c.name == "blast 50 kg at 5 m")
+    path = tmp_path / "sapling.lsys"
+    path.write_text(case.grammar)
+    scene = parse_scene({"name": "blast", "duration": 1.5, "fps": 24,
+                         "quality": {"nonlinear": "articulated"},
+                         "tree": [{"grammar": str(path)}], **case.scene}, file="<test>")
+    step = ArticulatedTier.step
+
+    def failing(self, h, force):
+        step(self, h, force)
+        if self.stats.steps > 20:
+            self.q[3] = np.nan
+            self._kinematics()
+
+    monkeypatch.setattr(ArticulatedTier, "step", failing)
+    logged = []
+    bake = bake_scene(scene, log=logged.append)
+    (tree,) = bake.trees
+    assert tree.info["solver"].startswith("linear, then pymunk at ")
+    assert "the articulated tier failed" in tree.info["solver"]
+    failed = [m for m in logged if "the articulated tier failed" in m]
+    assert failed and "non-finite state in the articulated tier" in failed[0]
+    assert np.isfinite(tree.positions).all()

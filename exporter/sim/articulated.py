@@ -45,10 +45,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SimulationError
 from ..rotations import quaternions_from_matrices
 from ..scene import Scene
 from .audit import Ledger, LoadWork, bone_energy
-from .common import Bones, SimTree, TreeMotion, cap_loads, locate, sub_frame_samples
+from .common import (
+    MAX_ANGULAR_SPEED,
+    Bones,
+    SimTree,
+    TreeMotion,
+    cap_loads,
+    locate,
+    sub_frame_samples,
+)
 from .contact import effective_mass, ground_forces, stored_energy
 from .events import TIER, Event
 from .featherstone import accelerations, kinematics
@@ -141,6 +150,7 @@ class ArticulatedTier:
     # state
 
     def _buffers(self) -> None:
+        """The kernels' state and work arrays (featherstone.py), allocated once."""
         nb, nd = self.n, 2 * self.n
         self.rot = np.zeros((nd, 3, 3))
         self.pivot = np.zeros((nd, 3))
@@ -175,19 +185,24 @@ class ArticulatedTier:
         return (self.axis[:, :3] * np.cross(lever, self.loads.g)).sum(1)
 
     def bone_rot(self) -> np.ndarray:
+        """Each bone's rotation relative to rest (B, 3, 3): its second hinge's."""
         return self.rot[1::2]
 
     def bone_pivot(self) -> np.ndarray:
+        """Each bone's pivot (B, 3) m."""
         return self.pivot[1::2]
 
     def omega(self) -> np.ndarray:
+        """Each bone's angular velocity (B, 3) rad/s, world axes."""
         return self.vel[1::2, :3]
 
     def vcom(self) -> np.ndarray:
+        """Each bone's COM velocity (B, 3) m/s (its spatial velocity at the COM)."""
         v = self.vel[1::2]
         return v[:, 3:] + np.cross(v[:, :3], self.com)
 
     def _axes(self) -> np.ndarray:
+        """Each bone's unit axis (B, 3) now."""
         a = np.einsum("bij,bj->bi", self.bone_rot(), self.tip_arm)
         return a / np.maximum(self.bones.length, 1e-12)[:, None]
 
@@ -329,6 +344,7 @@ class ArticulatedTier:
                     break
             elif step % self.force_every == 0:
                 samples.append((t, self.bone_rot().copy(), self.bone_pivot().copy()))
+            self._check(t)
             leaving = self._leaving(t)
             if leaving is not None:
                 handed_on = self._hand_off(t, *leaving, hand_back, work_start)
@@ -374,6 +390,7 @@ class ArticulatedTier:
         return result
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray, load_work: LoadWork) -> None:
+        """Frame f's pose and the audit's energy (J) and pending work."""
         quats[f] = quaternions_from_matrices(self.bone_rot())
         pivots[f] = self.bone_pivot()
         self.ledger.record(f, np.array([self.energy().sum() + self.contact_energy()]),
@@ -394,9 +411,25 @@ class ArticulatedTier:
         return force
 
     def locate(self, bone: int) -> tuple[str, int]:
+        """The tree name and a segment index of a bone."""
         return locate(self.trees, self.bones.offsets, self.bones.bone_tree, bone)
 
+    def _check(self, t: float) -> None:
+        """Stop on a non-finite state or a bone spinning faster than
+        MAX_ANGULAR_SPEED, naming the tree, a segment and the time (lod.py
+        then gives the tree to the pymunk tier from its hand-over)."""
+        w = self.omega()
+        spin = np.einsum("bi,bi->b", w, w)
+        bad = ~(spin <= MAX_ANGULAR_SPEED**2) | ~np.isfinite(self.com).all(1)
+        if not bad.any():
+            return
+        bone = int(np.argmax(bad))
+        what = (f"angular speed {math.sqrt(spin[bone]):.0f} rad/s > {MAX_ANGULAR_SPEED:.0f}"
+                if np.isfinite(spin[bone]) else "non-finite state")
+        raise SimulationError(f"{what} in the articulated tier", *self.locate(bone), t)
+
     def _tips_z(self) -> np.ndarray:
+        """Height (B,) m of each bone's tip."""
         return self.bone_pivot()[:, 2] + np.einsum("bj,bj->b", self.bone_rot()[:, 2],
                                                    self.tip_arm)
 

@@ -84,6 +84,12 @@ class LoadWork:
             return np.zeros(len(point))
         return (self.force * (point - self.point)).sum(1)
 
+    def keep(self, rows: np.ndarray) -> None:
+        """Keep only these rows (bones) of the held force and its points
+        (a solver that drops bones and renumbers the rest)."""
+        if self.force is not None:
+            self.force, self.point = self.force[rows], self.point[rows]
+
     def update(self, force: np.ndarray, point: np.ndarray) -> np.ndarray:
         """Per-bone work (J) since the previous update, and hold the new force."""
         if self.force is None or len(self.force) != len(point):

@@ -174,19 +174,23 @@ def accelerations(dof_parent, frame_dof, same_limb, mass, com, inertia, axis, ve
                   cone_stiffness, art, art_bias, composite, momentum, qdd):
     """Hinge accelerations `qdd` (D,) rad/s^2 from the state `kinematics`
     left, world `force` (B, 3) N at the bones' COMs and `torque` (B, 3) N m
-    about them, hinge torques `tau`
-    (D,) N m (changed in place: the structural damping is added) and
-    `armature` (D,) kg m^2. Structural damping: each limb's block of the
-    mass matrix times its own hinge rates, -damp_rate M_LL qd_L (the
-    reference's), from the bones' velocities relative to their limb's frame
-    bone (`frame_dof`: its dof 2p + 1, -1 = the world) with the side chains
-    on a limb carried rigidly (`same_limb`: whether a dof is in its parent
-    dof's limb). A hinge `past` its cone by that much (D,) rad (0: within
-    it) at rates `qd` (D,) rad/s meets a spring-damper of natural frequency `cone_omega` rad/s and
-    damping ratio `cone_zeta` against the joint's articulated inertia,
-    implicit over the step `h` s (the stiffness it had, N m/rad, goes to
-    `cone_stiffness` (D,)). Work arrays: art (D, 6, 6), art_bias (D, 6),
-    composite (D, 6, 6), momentum (D, 6)."""
+    about them, hinge torques `tau` (D,) N m and `armature` (D,) kg m^2
+    (both changed in place: damping and cones are added).
+
+    Structural damping: each limb's block of the mass matrix times its own
+    hinge rates, -damp_rate M_LL qd_L (the reference's), from the bones'
+    velocities relative to their limb's frame bone (`frame_dof`: its dof
+    2p + 1, -1 = the world), the side chains on a limb carried rigidly
+    (`same_limb`: whether a dof is in its parent dof's limb).
+
+    Cones: a hinge `past` its cone by that much (D,) rad (0: within it),
+    at rates `qd` (D,) rad/s, meets a spring-damper of natural frequency
+    `cone_omega` rad/s and damping ratio `cone_zeta` against the joint's
+    articulated inertia, implicit over the step `h` s; the stiffness it
+    had (N m/rad) goes to `cone_stiffness` (D,).
+
+    Work arrays: art (D, 6, 6), art_bias (D, 6), composite (D, 6, 6),
+    momentum (D, 6)."""
     n = len(qdd)
     tmp = np.empty(6)
     rel = np.empty(6)

@@ -321,7 +321,18 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         since = work_before - ho.work
         before = None if ho.before_blast is None else \
             replace(ho.before_blast, work=since + ho.before_blast.work)
-        result = tier.run(ho.time, (ho.q, ho.v), ho.step_length, before, work_before)
+        try:
+            result = tier.run(ho.time, (ho.q, ho.v), ho.step_length, before, work_before)
+        except SimulationError as exc:  # the pymunk tier takes the tree from the hand-over
+            log(f"{trees[i].name}: the articulated tier failed ({exc}); the pymunk tier "
+                "takes over")
+            uses[i] = TierUse(uses[i].tier.rsplit(", then articulated", 1)[0] + ", then pymunk",
+                              uses[i].switch, uses[i].reason + "; the articulated tier failed")
+            start = ho.before_blast if ho.before_blast is not None else ho
+            p_tier, _ = pymunk_from([(i, ho, start)], frames)
+            pym.append((p_tier, [i]))
+            take_pymunk(p_tier, [i], [work_before - ho.work + start.work])
+            return
         articulated_results.append(result)
         take(i, result.motions[trees[i].name], tier.first_frame, work_before)
         if result.handed_back is not None:
