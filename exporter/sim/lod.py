@@ -329,6 +329,8 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
             uses[i] = TierUse(uses[i].tier.rsplit(", then articulated", 1)[0] + ", then pymunk",
                               uses[i].switch, uses[i].reason + "; the articulated tier failed")
             start = ho.before_blast if ho.before_blast is not None else ho
+            handed.append(Event(start.time, trees[i].name, TIER, "",
+                                f"to pymunk: the articulated tier failed ({exc.message})"))
             p_tier, _ = pymunk_from([(i, ho, start)], frames)
             pym.append((p_tier, [i]))
             take_pymunk(p_tier, [i], [work_before - ho.work + start.work])
@@ -406,10 +408,10 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         if result.handed_back is not None:
             (i,) = members
             back_to_linear(i, *result.handed_back)
-    for e in handed:
-        i = next(k for k, t in enumerate(trees) if t.name == e.tree)
-        motions[i].events.insert(0, e)
-        motions[i].events.sort(key=lambda ev: ev.time)
+    for i, tree in enumerate(trees):  # switches first at a time, in the order they came
+        mine = [e for e in handed if e.tree == tree.name]
+        if mine:
+            motions[i].events = sorted(mine + motions[i].events, key=lambda ev: ev.time)
     stats = merge_stats([tier.stats for tier, _ in pym])
     for tier, _ in pym:
         if tier.projectiles is not None:
