@@ -87,6 +87,12 @@ FORCE_RATE = 500.0  # Hz, at least: the loads' updates (the reference's rate)
 BLAST_STEP = 1 / 2000  # s: the most a step lasts while a blast pushes or rings (the reference's)
 
 
+def split_note(steps: int) -> str:
+    """The bake's note on `steps` steps split while a blast acted."""
+    return (f"articulated tier: steps split to at most {BLAST_STEP * 1e3:.4g} ms while a blast "
+            f"pushed or its twigs rang (until {BLAST_RING:g} s after its push), on {steps} steps")
+
+
 @dataclass
 class ArticulatedStats:
     """What a run did (deterministic: no timings)."""
@@ -373,12 +379,8 @@ class ArticulatedTier:
                             np.array([e[0] for e in extra[0]]),
                             np.array([e[1] for e in extra[0]]).reshape(-1, n, 4),
                             np.array([e[2] for e in extra[0]]).reshape(-1, n, 3))
-        notes = []
         st = self.stats
-        if st.split:
-            notes.append(f"articulated tier: steps split to at most {BLAST_STEP * 1e3:.4g} ms "
-                         f"while a blast pushed or its twigs rang (until {BLAST_RING:g} s after "
-                         f"its push), on {st.split} steps")
+        notes = [split_note(st.split)] if st.split else []
         timing = {k: round(v, 3) for k, v in self.timing.items()}
         timing.update(segment_steps=tree.rig.model.n_segments * st.steps,
                       **frame_timing(frame_seconds, spf))

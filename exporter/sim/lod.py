@@ -560,7 +560,10 @@ class PlanarLOD:
             meta["articulated_step"] = min(r.meta["step"] for r in arts)
             for key in ("steps", "split", "updates"):
                 stats[f"articulated_{key}"] = sum(r.meta["stats"][key] for r in arts)
-            notes += list(dict.fromkeys(n for r in arts for n in r.notes))
+            if stats["articulated_split"]:  # one note for all runs, the counts summed
+                from .articulated import split_note
+
+                notes.append(split_note(stats["articulated_split"]))
         refs = [r for c in chunks for r in c.reference]
         back = sorted(b for c in chunks for b in c.came_back)
         stats["returned"] = len(back)
