@@ -1,8 +1,10 @@
 """The articulated tier (sim/articulated.py, sim/featherstone.py) against
 independent truths: the linear tier's mass matrix and prestress (a separate
-derivation), the conservation of energy of a double pendulum swinging
-through large angles, the Euler-Bernoulli cantilever, and the energy audit
-on the blast that the pymunk tier's one-way coupling failed."""
+derivation), the conservation of energy and angular momentum of a double
+pendulum swinging through large angles, the Euler-Bernoulli cantilever,
+and the energy audit on the blast that the pymunk tier's one-way coupling
+failed; and its place in the LOD: on to the pymunk tier as a joint nears
+breaking or where it fails, the same bake twice."""
 
 import math
 
