@@ -107,10 +107,8 @@ class ArticulatedStats:
 class ArticulatedTier:
     """Trees (handed over by the linear tier) stepped as articulated bodies."""
 
-    def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None):
+    def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads):
         self.trees, self.scene, self.quality, self.loads = trees, scene, quality, loads
-        self.log = log or (lambda msg: None)
         b = self.bones = Bones.of(trees)
         nb = self.n = b.n
         if np.any(b.parent >= np.arange(nb)):
@@ -129,6 +127,7 @@ class ArticulatedTier:
         self.k = np.repeat(b.k, 2).astype(float)
         self.cone = np.repeat(b.cone, 2).astype(float)
         self.alpha = np.repeat(b.alpha, 2).astype(float)
+        self._rates: dict[float, np.ndarray] = {}  # step (s) -> damping rate (_damp_rate)
         self.tip_arm = b.tip0 - b.pivot0
         # a tip's contact sphere never reaches below where it grew (chains/forces.py)
         self.contact_radius = np.minimum(b.radius, np.maximum(b.tip0[:, 2], 0.0))
@@ -245,7 +244,7 @@ class ArticulatedTier:
         tau = -k * (q + h * qd) - self.hold
         armature = h * h * k
         past = self.past_cone()
-        rate = np.where(self.alpha > 0, -np.expm1(-self.alpha * h) / h, 0.0)
+        rate = self._damp_rate(h)
         accelerations(self.dof_parent, self.frame_dof, self.same_limb, self.bones.mass, self.com,
                       self.inertia, self.axis, self.vel, self.bias, force, torque, tau, armature,
                       rate, self.loads.g, qd, past, h, CONE_OMEGA, CONE_DAMPING,
@@ -253,6 +252,13 @@ class ArticulatedTier:
         self.qd = qd + h * self.qdd
         self.q = q + h * self.qd
         self._kinematics()
+
+    def _damp_rate(self, h: float) -> np.ndarray:
+        """The damping rate (D,) 1/s of a step of h s: (1 - exp(-alpha h)) / h,
+        an exact decay over the step (one array per step length, kept)."""
+        if h not in self._rates:
+            self._rates[h] = np.where(self.alpha > 0, -np.expm1(-self.alpha * h) / h, 0.0)
+        return self._rates[h]
 
     def _touching(self):
         """The bones whose tips are in the ground: their indices, tip

@@ -310,30 +310,39 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
 
     articulated_results: list[SolveResult] = []
 
+    def on_to_pymunk(i: int, on: HandOff, why: str) -> tuple[HandOff, str]:
+        """Tree i from the articulated tier to a pymunk tier run to the end,
+        from `on` (or where a blast under way found it; work counted from
+        the bake's start): the state it starts from and the reason given."""
+        start = on.before_blast if on.before_blast is not None else on
+        reason = why if start is on else \
+            f"{why} at {on.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+        handed.append(Event(start.time, trees[i].name, TIER, "", f"to pymunk: {reason}"))
+        p_tier, _ = pymunk_from([(i, on, start)], frames)
+        pym.append((p_tier, [i]))
+        take_pymunk(p_tier, [i], [start.work])
+        return start, reason
+
     def articulated_run(i: int, ho: HandOff, work_before: float) -> None:
         """Tree i in the articulated tier from its hand-over `ho` (J done on
         it before: `work_before`), to the end, back to the linear tier or
-        on to the pymunk tier (from where a blast under way found it)."""
+        on to the pymunk tier."""
         from .articulated import ArticulatedTier  # numba, loaded when a tree first needs it
 
-        tier = ArticulatedTier([trees[i]], scene, quality, loads, log=log)
-        # the linear tier's snapshot counts its work from that tier's start
-        since = work_before - ho.work
-        before = None if ho.before_blast is None else \
-            replace(ho.before_blast, work=since + ho.before_blast.work)
+        # the work counted from the bake's start (the linear tier counts from its own)
+        before = ho.before_blast
+        ho = replace(ho, work=work_before, before_blast=None if before is None else
+                     replace(before, work=work_before - ho.work + before.work))
+        tier = ArticulatedTier([trees[i]], scene, quality, loads)
         try:
-            result = tier.run(ho.time, (ho.q, ho.v), ho.step_length, before, work_before)
+            result = tier.run(ho.time, (ho.q, ho.v), ho.step_length, ho.before_blast,
+                              work_before)
         except SimulationError as exc:  # the pymunk tier takes the tree from the hand-over
             log(f"{trees[i].name}: the articulated tier failed ({exc}); the pymunk tier "
                 "takes over")
             uses[i] = TierUse(uses[i].tier.rsplit(", then articulated", 1)[0] + ", then pymunk",
                               uses[i].switch, uses[i].reason + "; the articulated tier failed")
-            start = ho.before_blast if ho.before_blast is not None else ho
-            handed.append(Event(start.time, trees[i].name, TIER, "",
-                                f"to pymunk: the articulated tier failed ({exc.message})"))
-            p_tier, _ = pymunk_from([(i, ho, start)], frames)
-            pym.append((p_tier, [i]))
-            take_pymunk(p_tier, [i], [work_before - ho.work + start.work])
+            on_to_pymunk(i, ho, f"the articulated tier failed ({exc.message})")
             return
         articulated_results.append(result)
         take(i, result.motions[trees[i].name], tier.first_frame, work_before)
@@ -343,16 +352,10 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         on = result.handed_on
         if on is None:
             return
-        start = on.before_blast if on.before_blast is not None else on
-        reason = on.reason if start is on else \
-            f"{on.reason} at {on.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+        start, reason = on_to_pymunk(i, on, on.reason)
         uses[i] = TierUse(f"{uses[i].tier}, then pymunk", uses[i].switch,
                           f"{uses[i].reason}; to pymunk at {start.time:.3f} s: {reason}")
-        handed.append(Event(start.time, trees[i].name, TIER, "", f"to pymunk: {reason}"))
         log(f"t = {on.time:.3f} s: {trees[i].name} leaves the articulated tier ({reason})")
-        p_tier, _ = pymunk_from([(i, on, start)], frames)
-        pym.append((p_tier, [i]))
-        take_pymunk(p_tier, [i], [start.work])
 
     k = 0
     # trees given back may leave again: returns and reference runs are appended
