@@ -90,6 +90,14 @@ class LoadWork:
         if self.force is not None:
             self.force, self.point = self.force[rows], self.point[rows]
 
+    def update_rows(self, rows: np.ndarray, force: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """Per-bone work (J) of `rows` since their previous update, and hold
+        their new force (a model updated more often than the rest: the
+        others' forces hold on). For held loads only."""
+        work = (self.force[rows] * (point - self.point[rows])).sum(1)
+        self.force[rows], self.point[rows] = force, point
+        return work
+
     def update(self, force: np.ndarray, point: np.ndarray) -> np.ndarray:
         """Per-bone work (J) since the previous update, and hold the new force."""
         if self.force is None or len(self.force) != len(point):

@@ -30,7 +30,8 @@ reach share one model with the projectiles):
   at the bones' COMs (`xfrc_applied`), evaluated at `force_rate` (500 Hz;
   drag and gusts change far slower; a blast's pulse is integrated exactly
   over the interval by SceneLoads, its rate capped at MAX_ACCELERATION x
-  mass and the rest of its impulse delivered after) and held between; other
+  mass and the rest of its impulse delivered after) and held between (while
+  a blast splits a model's step to BLAST_STEP, every substep); other
   loads capped at MAX_ACCELERATION x mass as in the planar LOD, and counted.
 - Structural damping: the rig's mass-proportional damping of each bone's
   motion relative to its limb's frame (the bone the limb hangs on; the
@@ -164,12 +165,13 @@ SETTLE_TIME = 0.5  # s
 TWIG_HZ = 50.0  # a twig's ringing under a blast front (the blast note's example)
 SPIN_PER_STEP = 0.05  # rad: most a free part turns in one step (more: the step is split)
 MAX_SUBSTEPS = 8
-# A blast's twigs ring on after its push. With `split_blasts` (the planar
-# LOD's nonlinear engine, whose coarse step would damp the ringing:
-# docs/physics.md), a model's step is split to at most BLAST_STEP from a
-# blast's arrival at its trees until BLAST_RING s after its push
-# (loads.blast_windows) has ended
-BLAST_STEP = DEFAULT_TIMESTEP  # s
+# A blast's twigs ring on after its push at tens of Hz, which the
+# stiffness-implicit step damps by about pi f h: a model's step is split to
+# at most BLAST_STEP from a blast's arrival at its trees until BLAST_RING s
+# after its push (loads.blast_windows) has ended. The `explosion` preset's oak
+# broke 2, 6, 7 and 7 joints with its blast windows at 1/2000, 1/16000,
+# 1/32000 and 1/64000 s (docs/physics.md, "The step while a blast rings")
+BLAST_STEP = 1 / 32000  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 IN_GROUND = 4  # contype of a capsule in the ground at rest: projectiles hit it, the ground not
@@ -274,10 +276,19 @@ class _Group:
     damp_row: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     damp_col: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     damp_adr: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    damp_alpha: np.ndarray = field(default_factory=lambda: np.zeros(0))  # 1/s
+    # 1/s: alpha as an exact decay over damp_hold, the time (s) one evaluation
+    # of the damping is held: the solver's step, or a substep while a blast rings
     damp_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    damp_hold: float = 0.0
     damp_below: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     has_free: bool = False  # some bone is a free part's first (its damping is kept stable)
-    substeps: int = 1  # MuJoCo steps per solver step (fast-spinning free parts)
+    substeps: int = 1  # MuJoCo steps per solver step (fast-spinning free parts, blasts)
+    # a blast splits the step: loads and damping are worked out every substep (_blast_step)
+    blast: bool = False
+    # while a blast splits the step: each joint's largest bending moment (N m)
+    # over the MuJoCo steps since the last break check (None: not tracked)
+    peak: np.ndarray | None = None
 
 
 class ReferenceSolver:
@@ -286,16 +297,14 @@ class ReferenceSolver:
     `timestep` (s, default DEFAULT_TIMESTEP; TIMESTEPS for the accuracy
     report) is rounded so that a frame is a whole number of force
     intervals; `force_rate` (Hz, default DEFAULT_FORCE_RATE; inf = every
-    step) is how often the loads are evaluated (damping is every step).
-    With `split_blasts` (the planar LOD's engine, at its coarse step), a
-    model's step is split to at most BLAST_STEP while a blast pushes its
-    trees and their twigs ring (BLAST_RING). `quality` is the planar LOD's
+    step) is how often the loads are evaluated (damping is every MuJoCo
+    step). A model's step is split to at most BLAST_STEP while a blast
+    pushes its trees and their twigs ring (BLAST_RING). `quality` is the planar LOD's
     and only recorded: the rig's bones are already merged by it
     (bone_length)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None, timestep: float | None = None, force_rate: float | None = None,
-                 split_blasts: bool = False):
+                 log=None, timestep: float | None = None, force_rate: float | None = None):
         self.scene, self.quality, self.loads = scene, quality, loads
         self.log = log or (lambda msg: None)
         self.trees = [t for t in trees if t.active]
@@ -313,7 +322,7 @@ class ReferenceSolver:
         self._collect()
         # MuJoCo steps per step while a blast pushes or rings (BLAST_RING),
         # and when, per tree (s)
-        self.blast_split = max(1, math.ceil(self.h / BLAST_STEP - 1e-9)) if split_blasts else 1
+        self.blast_split = max(1, math.ceil(self.h / BLAST_STEP - 1e-9))
         tree_bones = [slice(self.offsets[ti], self.offsets[ti + 1])
                       for ti in range(len(self.trees))]
         self.blast_windows = [self.loads.blast_windows(self.com0[b], self.axis0[b],
@@ -356,8 +365,6 @@ class ReferenceSolver:
         self.cone = np.repeat(self.bones.cone[:, None], 2, axis=1)
         self.springref = np.zeros((n, 2))
         self.damped = np.ones((n, 2), dtype=bool)  # hinges the structural damping acts on
-        # damping rate per bone (1/s): alpha as an exact decay over a step
-        self.damp_rate = -np.expm1(-self.alpha * self.h) / self.h
         self.attached = np.ones(n, dtype=bool)  # the joint at the bone's base holds
         self.piece_root = np.full(n, -1, dtype=np.int64)  # first bone of a free part, -1
         self.breakable = np.isfinite(self.strength)
@@ -514,7 +521,7 @@ class ReferenceSolver:
                 j = m.joint(f"f{b}").id
                 g.free_qpos[i], g.free_dof[i] = m.jnt_qposadr[j], m.jnt_dofadr[j]
         g.has_free = bool((g.free_dof >= 0).any())
-        g.substeps = 1
+        g.substeps, g.peak, g.blast, g.damp_hold = 1, None, False, self.h
         has = g.hinge_jnt >= 0
         g.hinge_qpos = np.where(has, m.jnt_qposadr[np.maximum(g.hinge_jnt, 0)], -1)
         g.hinge_dof = np.where(has, m.jnt_dofadr[np.maximum(g.hinge_jnt, 0)], -1)
@@ -539,7 +546,7 @@ class ReferenceSolver:
         has = (g.hinge_dof >= 0) & self.damped[g.bones]
         rows = np.nonzero(has)[0]
         limb[g.hinge_dof[has]] = self.limb[g.bones[rows]]
-        rate[g.hinge_dof[has]] = self.damp_rate[g.bones[rows]]
+        rate[g.hinge_dof[has]] = self.alpha[g.bones[rows]]
         nnz = m.M_rownnz
         row = np.repeat(np.arange(m.nv), nnz)
         first = np.cumsum(nnz) - nnz  # each row's first entry, counted densely
@@ -547,7 +554,8 @@ class ReferenceSolver:
         col = m.M_colind[adr]
         keep = (limb[row] >= 0) & (limb[row] == limb[col]) & (rate[row] > 0)
         g.damp_row, g.damp_col, g.damp_adr = row[keep], col[keep], adr[keep]
-        g.damp_rate = rate[g.damp_row]
+        g.damp_alpha = rate[g.damp_row]
+        g.damp_rate = -np.expm1(-g.damp_alpha * g.damp_hold) / g.damp_hold
         g.damp_below = g.damp_row != g.damp_col
 
     def _transfer(self, g: _Group, sources: list[_Group]) -> None:
@@ -661,13 +669,21 @@ class ReferenceSolver:
         substep under SPIN_PER_STEP (at most MAX_SUBSTEPS), loads and
         damping held; counted in stats.split. And of models a blast pushes
         or whose twigs it rings (`_blast_rings`), to BLAST_STEP, counted in
-        stats.blast_split."""
+        stats.blast_split: loads and damping worked out again every substep
+        (`_blast_step`), and the joints' bending moments tracked over every
+        substep (`_Group.peak`), so that a twig's peak between two checks is
+        not missed."""
         if self.blast_split == 1 and not any(g.has_free for g in self.groups):
             return  # (every model steps whole: nothing can have split it)
         for gi, g in enumerate(self.groups):
-            n = self.blast_split if self._blast_rings(g, t) else 1
+            blast = self._blast_rings(g, t)
+            n = self.blast_split if blast else 1
             if n > 1:
                 self.stats.blast_split += 1
+                if g.peak is None and (self.breakable[g.bones] & self.attached[g.bones]).any():
+                    g.peak = np.zeros(len(g.bones))
+            else:
+                g.peak = None
             if g.has_free:
                 bones = g.bones
                 rows = bones[(self.piece_root[bones] >= 0) & (self.group_of_bone[bones] == gi)]
@@ -678,9 +694,12 @@ class ReferenceSolver:
                 if spin > 1:
                     self.stats.split += 1
                 n = max(n, spin)
-            if n != g.substeps:
-                g.substeps = n
+            g.blast = blast and n > 1
+            hold = self.h / n if g.blast else self.h
+            if n != g.substeps or hold != g.damp_hold:
+                g.substeps, g.damp_hold = n, hold
                 g.model.opt.timestep = self.h / n
+                g.damp_rate = -np.expm1(-g.damp_alpha * hold) / hold
 
     def _blast_rings(self, g: _Group, t: float) -> bool:
         """Whether a blast pushes the model's trees within the load interval
@@ -689,10 +708,57 @@ class ReferenceSolver:
                    for ti in g.trees if ti < len(self.blast_windows))
 
     def _substeps(self) -> None:
-        """The remaining substeps of split models (after their first)."""
+        """The remaining substeps of models split for fast free parts (after
+        their first), loads and damping held (models a blast splits step in
+        _blast_step)."""
         for g in self.groups:
-            for _ in range(g.substeps - 1):
-                mujoco.mj_step(g.model, g.data)
+            if not g.blast:
+                for _ in range(g.substeps - 1):
+                    mujoco.mj_step(g.model, g.data)
+
+    def _blast_step(self, g: _Group, t: float, damped: bool, ready: bool) -> None:
+        """One step (from t, s) of a model a blast splits, in its substeps,
+        each with its own loads, damping and joint moments (`ready`: the
+        first substep's mj_step1 is done). Held over a step split 67 times
+        (the LOD's 1/480 s), the damping lagged a twig's ringing at hundreds
+        of Hz by more than half a period and pumped it (the `explosion`
+        preset's oak broke 22 joints at 1/64000 s instead of 7); and the
+        loads, held over the load interval, gave a violent blast's breaks
+        by that interval (50 kg of TNT 3 m from a sapling: 16 joints at
+        2 ms, 24 at 2.5 ms, 20-22 with the loads updated every step)."""
+        h = self.h / g.substeps
+        for k in range(g.substeps):
+            if k or not ready:
+                mujoco.mj_step1(g.model, g.data)
+            self._read_group(g)
+            self._track_peak(g)
+            g.data.xfrc_applied[g.body, :3] = self._group_loads(g, t + k * h, h)
+            if damped:
+                self._damping(g)
+            mujoco.mj_step2(g.model, g.data)
+
+    def _group_loads(self, g: _Group, t: float, dt: float) -> np.ndarray:
+        """Air, blasts and pulls (N, world, at the COMs) on g's bones over
+        [t, t + dt] (s), capped as `_external`'s, their work recorded (the
+        other models' loads hold on)."""
+        b = g.bones
+        axis = np.einsum("bij,bj->bi", self.rot[b], self.axis0[b])
+        force = self.loads.forces(t, self.com[b], self.vcom[b], axis, self.props.take(b),
+                                  include_gravity=False, dt=dt)
+        pulls = self.bones.pull_forces(t)
+        if pulls is not None:
+            force += pulls[b]
+        force = cap_loads(force, self.mass[b], t, self.stats, lambda i: self.locate(int(b[i])),
+                          self.loads.blast_capped)
+        work = self.load_work.update_rows(b, force, self.com[b])
+        self.ledger.add_work(per_tree(work, self.bone_tree[b], len(self.trees)))
+        return force
+
+    def _track_peak(self, g: _Group) -> None:
+        """Keep each joint's largest bending moment (N m) while a blast
+        splits g's step."""
+        if g.peak is not None:
+            np.maximum(g.peak, self._moments(g), out=g.peak)
 
     def _external(self, t: float) -> np.ndarray:
         """Air, blasts, attractors and pulls (N, world, at the COMs), capped
@@ -755,7 +821,7 @@ class ReferenceSolver:
         y = np.ascontiguousarray(tau, dtype=float)[None, :]
         x = np.empty_like(y)
         mujoco.mj_solveM(g.model, g.data, x, y)
-        curvature = self.h * float(y[0] @ x[0])
+        curvature = g.damp_hold * float(y[0] @ x[0])
         if curvature <= lost:
             return 1.0
         self.stats.damping_scaled += 1
@@ -818,6 +884,9 @@ class ReferenceSolver:
             if not cand.any():
                 continue
             moment = self._moments(g)
+            if g.peak is not None:  # a blast splits the step: its substeps' peaks too
+                np.maximum(moment, g.peak, out=moment)
+                g.peak[:] = 0.0
             self._closest(g, cand, moment, t)
             over = np.nonzero(cand & (moment > self.strength[g.bones]))[0]
             for i in over:
@@ -996,7 +1065,10 @@ class ReferenceSolver:
             update = step % self.force_every == 0
             if not update and not damped:
                 for g in self.groups:
-                    mujoco.mj_step(g.model, g.data)
+                    if g.blast:
+                        self._blast_step(g, t, damped, ready=False)
+                    else:
+                        mujoco.mj_step(g.model, g.data)
                 self._substeps()
                 self.timing["step_seconds"] += time.perf_counter() - t0
                 self.step_times.append(time.perf_counter() - t0)
@@ -1047,7 +1119,10 @@ class ReferenceSolver:
                     self._damping(g)
             t2 = time.perf_counter()
             for g in self.groups:
-                mujoco.mj_step2(g.model, g.data)
+                if g.blast:
+                    self._blast_step(g, t, damped, ready=True)
+                else:
+                    mujoco.mj_step2(g.model, g.data)
             self._substeps()
             t3 = time.perf_counter()
             self.timing["update_seconds"] += t2 - t1
@@ -1209,14 +1284,12 @@ class ReferenceSolver:
                  ("reference: joints are two perpendicular hinges (no twist); the cone limit "
                   "is a square in the two swing angles; bones of different trees do not collide")]
         if self.scene.explosions:
-            # docs/physics.md: 50 kg at 3 m from a sapling breaks 15 joints
-            # at 1/2000 s, 17 at 1/8000 s, 16 at 1/32000 s
             h = self.h / self.blast_split  # s, the step while a blast pushes and rings
-            notes.append(f"reference: a blast rings twigs at tens of Hz, which its step there "
-                         f"({h * 1e3:.4g} ms) damps by about {math.pi * TWIG_HZ * h:.2g} "
-                         f"(ratio, at {TWIG_HZ:g} Hz): "
-                         "twig peaks, and breaks near a twig's strength, converge only near "
-                         "1/64000 s (--timestep)")
+            notes.append(f"reference: while a blast pushes and for {BLAST_RING:g} s after, the "
+                         f"step is {h * 1e3:.4g} ms, which damps a twig ringing at {TWIG_HZ:g} Hz "
+                         f"by about {math.pi * TWIG_HZ * h:.2g} (ratio), with the loads updated "
+                         "every step; breaks are checked against each joint's largest moment "
+                         "over those steps")
         if st.limited:
             notes.append(cap_note(st))
         stats = {"steps": st.steps, "updates": st.updates, "models": len(self.groups),
