@@ -193,7 +193,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         half delivered; the linear tier, linearised at its step, rang the
         twigs differently from the nonlinear engines (the `explosion`
         preset's oak broke 4 joints on MuJoCo, where the reference breaks 7;
-        from the blast's arrival, 6)."""
+        from the blast's arrival, 7)."""
         to = engine_for(ho.kind)
         start = ho if ho.before_blast is None else ho.before_blast
         reason = ho.reason if start is ho else \
