@@ -170,7 +170,7 @@ MAX_SUBSTEPS = 8
 # at most BLAST_STEP from a blast's arrival at its trees until BLAST_RING s
 # after its push (loads.blast_windows) has ended. The `explosion` preset's oak
 # broke 2, 6, 7 and 7 joints with its blast windows at 1/2000, 1/16000,
-# 1/32000 and 1/64000 s (docs/physics.md, "The step while a blast rings")
+# 1/32000 and 1/64000 s (docs/physics.md, "The step while a blast rings, converged")
 BLAST_STEP = 1 / 32000  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
