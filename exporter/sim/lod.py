@@ -185,6 +185,14 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
     handed: list = []
     linear_work: dict[int, float] = {}  # J done on a tree in the linear tier before it left
 
+    def from_blast(ho: HandOff, why: str) -> tuple[HandOff, str]:
+        """The state an engine takes a tree from that left at `ho` for
+        `why`: where a blast under way found it (linear.py,
+        `_keep_before_blast`), else `ho`; and the reason to give."""
+        start = ho if ho.before_blast is None else ho.before_blast
+        return start, why if start is ho else \
+            f"{why} at {ho.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+
     def leaves(i: int, ho: HandOff) -> tuple[str, HandOff]:
         """Tree i left a linear tier (`ho`): its engine, recorded and logged,
         and the state that engine starts from: a tree that leaves while a
@@ -195,9 +203,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         preset's oak broke 4 joints on MuJoCo, where the reference breaks 7;
         from the blast's arrival, 7)."""
         to = engine_for(ho.kind)
-        start = ho if ho.before_blast is None else ho.before_blast
-        reason = ho.reason if start is ho else \
-            f"{ho.reason} at {ho.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+        start, reason = from_blast(ho, ho.reason)
         u = uses[i]
         uses[i] = TierUse(f"linear, then {to}", round(start.time, 6), reason) \
             if u.switch is None else \
@@ -321,9 +327,7 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         """Tree i from the articulated tier to a pymunk tier run to the end,
         from `on` (or where a blast under way found it; work counted from
         the bake's start): the state it starts from and the reason given."""
-        start = on.before_blast if on.before_blast is not None else on
-        reason = why if start is on else \
-            f"{why} at {on.time:.3f} s; taken from {start.time:.3f} s, {start.reason}"
+        start, reason = from_blast(on, why)
         handed.append(Event(start.time, trees[i].name, TIER, "", f"to pymunk: {reason}"))
         p_tier, _ = pymunk_from([(i, on, start)], frames)
         pym.append((p_tier, [i]))
