@@ -84,7 +84,11 @@ from .solver import SolveResult, frame_timing
 CONE_OMEGA = 400.0  # rad/s
 CONE_DAMPING = 1.0  # damping ratio
 FORCE_RATE = 500.0  # Hz, at least: the loads' updates (the reference's rate)
-BLAST_STEP = 1 / 2000  # s: the most a step lasts while a blast pushes or rings (the reference's)
+# s: the most a step lasts while a blast pushes or rings: the reference's
+# outer step. (The reference splits its blast windows further, to
+# reference.BLAST_STEP, for its twigs' break count; a tree here that nears
+# breaking goes to the pymunk tier, which replays the blast.)
+BLAST_STEP = 1 / 2000
 
 
 def split_note(steps: int) -> str:

@@ -366,6 +366,9 @@ class ReferenceSolver:
         self.springref = np.zeros((n, 2))
         self.damped = np.ones((n, 2), dtype=bool)  # hinges the structural damping acts on
         self.attached = np.ones(n, dtype=bool)  # the joint at the bone's base holds
+        # joints that passed their strength within a blast's split step
+        # (_release): (time s, bone, moment N m), their parts leave at the next check
+        self.released: list[tuple[float, int, float]] = []
         self.piece_root = np.full(n, -1, dtype=np.int64)  # first bone of a free part, -1
         self.breakable = np.isfinite(self.strength)
         self.cut_state = ["standing" if t.cut is not None else "" for t in self.trees]
@@ -731,7 +734,7 @@ class ReferenceSolver:
             if k or not ready:
                 mujoco.mj_step1(g.model, g.data)
             self._read_group(g)
-            self._track_peak(g)
+            self._track_peak(g, t + k * h)
             g.data.xfrc_applied[g.body, :3] = self._group_loads(g, t + k * h, h)
             if damped:
                 self._damping(g)
@@ -754,11 +757,42 @@ class ReferenceSolver:
         self.ledger.add_work(per_tree(work, self.bone_tree[b], len(self.trees)))
         return force
 
-    def _track_peak(self, g: _Group) -> None:
+    def _track_peak(self, g: _Group, t: float) -> None:
         """Keep each joint's largest bending moment (N m) while a blast
-        splits g's step."""
-        if g.peak is not None:
-            np.maximum(g.peak, self._moments(g), out=g.peak)
+        splits g's step, and release those past their strength at this
+        substep (at t, s)."""
+        if g.peak is None:
+            return
+        moment = self._moments(g)
+        np.maximum(g.peak, moment, out=g.peak)
+        over = self.breakable[g.bones] & self.attached[g.bones] & \
+            (moment > self.strength[g.bones])
+        if over.any():
+            self._release(g, over, moment, t)
+
+    def _release(self, g: _Group, over: np.ndarray, moment: np.ndarray, t: float) -> None:
+        """The joints of g's bones `over` (mask) passed their strength at a
+        blast's substep (at t, s): from the next substep they carry no
+        moment (springs and limits off, a free pivot, undamped), and their
+        parts leave the model at the next break check (`_events`), which
+        dates the break t. A joint that goes only at the check (every 2 ms)
+        kept loading its parent up to 2 ms past its strength, and which of
+        the `explosion` preset's sapling's marginal twigs went depended on
+        the check interval: 13 of the reference's, 17 of the LOD's, against
+        15 with every step checked (docs/physics.md, "Breaks at the
+        substep")."""
+        self._closest(g, over, moment, t)
+        m = g.model
+        for i in np.nonzero(over)[0]:
+            b = int(g.bones[i])
+            jnt = g.hinge_jnt[i][g.hinge_jnt[i] >= 0]
+            m.jnt_stiffness[jnt] = 0.0
+            m.jnt_limited[jnt] = 0
+            self.k[b] = 0.0
+            self.breakable[b] = False
+            self.damped[b] = False
+            self.released.append((t, b, float(moment[i])))
+        self._damping_pairs(g)
 
     def _external(self, t: float) -> np.ndarray:
         """Air, blasts, attractors and pulls (N, world, at the COMs), capped
@@ -879,6 +913,10 @@ class ReferenceSolver:
                     self.events.append(Event(t, tree.name, HINGE, self._path(roots[0]),
                                              f"lean {math.degrees(lean.max()):.0f} deg"))
                     freed.setdefault(gi, []).extend(int(b) for b in roots)
+        for tb, b, moment_b in self.released:
+            self._broke(tb, b, moment_b)
+            freed.setdefault(int(self.group_of_bone[b]), []).append(b)
+        self.released = []
         for gi, g in enumerate(self.groups):
             cand = self.breakable[g.bones] & self.attached[g.bones]
             if not cand.any():
@@ -891,13 +929,8 @@ class ReferenceSolver:
             over = np.nonzero(cand & (moment > self.strength[g.bones]))[0]
             for i in over:
                 b = int(g.bones[i])
-                self.attached[b] = False
                 self.breakable[b] = False
-                ti, seg = int(self.bone_tree[b]), self.locate(b)[1]
-                why = f"{moment[i]:.0f} N m > strength {self.strength[b]:.0f} N m"
-                kind = UPROOTED if self.parent[b] < 0 else BROKE
-                self.events.append(Event(t, self.trees[ti].name, kind, self.paths[ti][seg], why))
-                self.stats.broken += 1
+                self._broke(t, b, float(moment[i]))
                 freed.setdefault(gi, []).append(b)
         out = []
         if freed:
@@ -910,6 +943,15 @@ class ReferenceSolver:
             mujoco.mj_step1(g.model, g.data)
             self._read_group(g)
         return out
+
+    def _broke(self, t: float, b: int, moment: float) -> None:
+        """The joint at bone b's base went at t (s) under `moment` (N m)."""
+        self.attached[b] = False
+        ti, seg = int(self.bone_tree[b]), self.locate(b)[1]
+        why = f"{moment:.0f} N m > strength {self.strength[b]:.0f} N m"
+        kind = UPROOTED if self.parent[b] < 0 else BROKE
+        self.events.append(Event(t, self.trees[ti].name, kind, self.paths[ti][seg], why))
+        self.stats.broken += 1
 
     def _closest(self, g: _Group, cand: np.ndarray, moment: np.ndarray, t: float) -> None:
         """Keep the largest moment / strength of the group's breakable joints."""
@@ -1157,7 +1199,7 @@ class ReferenceSolver:
         its pose within linear.in_return_range for a linear step of
         `h_linear` s (motion that step resolves: a blast's twig ringing
         stays here until it has died down)."""
-        if (not self.attached.all() or any(self.cut_state)
+        if (not self.attached.all() or self.released or any(self.cut_state)
                 or any(g.projectiles for g in self.groups)
                 or not self.loads.blasts_passed(t, self.com[:self.n], self._axes(),
                                                 self.props)):
