@@ -18,8 +18,8 @@ critically damped spring (CONE_OMEGA against the joint's articulated
 inertia). Loads (air, blasts, attractors, pulls) are world forces at the
 bones' COMs, evaluated at FORCE_RATE at least (every step at 1/480 s) and
 held; while a blast pushes or its twigs ring (linear.BLAST_RING) the step is
-split to at most BLAST_STEP with the loads evaluated every part, as the
-reference's. The ground pushes on the tips in it (contact.py's penalty
+split to at most linear.BLAST_STEP with the loads evaluated every part, as
+the reference's. The ground pushes on the tips in it (contact.py's penalty
 springs, tuned to each bone's own free-body mass at the tip, a lower bound
 of what the tree presents there, so they hold at the step).
 
@@ -29,12 +29,18 @@ h^2 k in the algorithm's joint inertia): a joint is stable at any step
 against all it carries, so no rotary inertia is raised, and the step damps
 a mode of f Hz by about pi f h, as MuJoCo's stiffness-implicit step.
 
-A tree leaves for the pymunk tier (which breaks joints and fells) when a
-joint's bending moment passes linear.BREAK_MARGIN of its strength or its
-felling cut comes: `handed_on`, a linear.HandOff (from where a blast under
-way found the tree, as the linear tier's). It goes back to the linear tier
-once it has stayed in that tier's range for linear.RETURN_WINDOW, as from
-the reference.
+Breaking: a joint past its strength breaks here at the step it passes it
+(while a blast pushes or rings, the step is split to linear.BLAST_STEP, as
+the reference's), and the part it held moves on as rigid debris
+(debris.py) with the momentum it had; its bones stay in the articulated
+body massless, springless and still, so the rest moves as if they were
+gone. A tree leaves for the pymunk tier (which uproots and fells) when its
+felling cut comes or a root's bending moment passes linear.BREAK_MARGIN of
+its strength: `handed_on`, a linear.HandOff, from where a blast under way
+found the tree (as the linear tier's) or, once a part broke off, from where
+this tier took it: the pymunk tier replays what broke. It goes back to the
+linear tier once it has stayed in that tier's range for
+linear.RETURN_WINDOW, as from the reference (never once a part broke off).
 """
 
 from __future__ import annotations
@@ -59,11 +65,13 @@ from .common import (
     sub_frame_samples,
 )
 from .contact import effective_mass, ground_forces, stored_energy
-from .events import TIER, Event
+from .debris import Debris
+from .events import BROKE, TIER, Event
 from .featherstone import accelerations, kinematics
 from .layout import ChainLayout
 from .linear import (
     BLAST_RING,
+    BLAST_STEP,
     BREAK_MARGIN,
     RETURN_DETAIL,
     RETURN_WINDOW,
@@ -84,17 +92,18 @@ from .solver import SolveResult, frame_timing
 CONE_OMEGA = 400.0  # rad/s
 CONE_DAMPING = 1.0  # damping ratio
 FORCE_RATE = 500.0  # Hz, at least: the loads' updates (the reference's rate)
-# s: the most a step lasts while a blast pushes or rings: the reference's
-# outer step. (The reference splits its blast windows further, to
-# reference.BLAST_STEP, for its twigs' break count; a tree here that nears
-# breaking goes to the pymunk tier, which replays the blast.)
-BLAST_STEP = 1 / 2000
 
 
 def split_note(steps: int) -> str:
     """The bake's note on `steps` steps split while a blast acted."""
     return (f"articulated tier: steps split to at most {BLAST_STEP * 1e3:.4g} ms while a blast "
             f"pushed or its twigs rang (until {BLAST_RING:g} s after its push), on {steps} steps")
+
+
+def broken_note(broken: int, parts: int) -> str:
+    """The bake's note on joints the articulated tier broke."""
+    return (f"articulated tier: {broken} joints broke in blasts; {parts} parts fell off as "
+            "rigid debris")
 
 
 @dataclass
@@ -106,6 +115,8 @@ class ArticulatedStats:
     updates: int = 0  # load evaluations
     limited: int = 0  # bone updates whose load was capped (common.cap_loads)
     first_limit: tuple | None = None  # (tree, segment, time s, m/s^2)
+    broken: int = 0  # joints broken (in blasts)
+    debris: int = 0  # parts broken off, each a rigid body
 
 
 class ArticulatedTier:
@@ -147,6 +158,14 @@ class ArticulatedTier:
                                                   b.props.take(slice(lo, hi)))
                               for lo, hi in zip(b.offsets[:-1], b.offsets[1:])]
         self.cut_time = np.array([t.cut.time if t.cut is not None else np.inf for t in trees])
+        # what breaks: the model's mass and inertia (0 on bones broken off),
+        # each bone's joint holding, its part's rigid body
+        self.mass, self.inertia0 = b.mass.copy(), b.inertia.copy()
+        self.gone = np.zeros(nb, dtype=bool)
+        self.breakable = np.isfinite(b.strength) & (b.parent >= 0)
+        self.armature = np.zeros(nd)  # kg m^2 a bone broken off keeps on its hinges
+        self.debris = Debris(b.mass, b.inertia, b.com0, b.pivot0, b.tip0, b.radius,
+                             scene.ground, loads.g)
         self.stats = ArticulatedStats()
         self.timing = {"step_seconds": 0.0, "update_seconds": 0.0}
         self._buffers()
@@ -176,7 +195,7 @@ class ArticulatedTier:
     def _kinematics(self) -> None:
         b = self.bones
         kinematics(self.q, self.qd, self.dof_parent, self.rest_axis, b.parent, b.pivot0,
-                   self.com_arm0, b.inertia, self.rot, self.pivot, self.com, self.inertia,
+                   self.com_arm0, self.inertia0, self.rot, self.pivot, self.com, self.inertia,
                    self.axis, self.vel, self.bias)
 
     def _gravity_torque(self) -> np.ndarray:
@@ -222,14 +241,34 @@ class ArticulatedTier:
         return np.sqrt((mom.reshape(-1, 2) ** 2).sum(1))
 
     def energy(self) -> np.ndarray:
-        """Per bone (B,) J: kinetic, gravitational (above z = 0), springs and cones."""
+        """Per bone (B,) J: kinetic, gravitational (above z = 0), springs and
+        cones; a bone broken off: its rigid body's share, with its ends'
+        ground springs."""
         b = self.bones
-        e = bone_energy(b.mass, b.inertia, self.bone_rot(), self.com, self.vcom(), self.omega(),
-                        -self.loads.g[2])
+        e = bone_energy(self.mass, self.inertia0, self.bone_rot(), self.com, self.vcom(),
+                        self.omega(), -self.loads.g[2])
         mom = self.k * self.q + self.hold
         past = self.past_cone()
-        spring = 0.5 * mom * mom / self.k + 0.5 * self.cone_stiffness * past * past
-        return e + spring.reshape(-1, 2).sum(1)
+        spring = np.divide(0.5 * mom * mom, self.k, out=np.zeros_like(mom), where=self.k > 0) \
+            + 0.5 * self.cone_stiffness * past * past
+        e += spring.reshape(-1, 2).sum(1)
+        if self.debris.count:
+            d = self.debris.bones
+            rot, pivot, vcom, w = self.debris.bone_poses()
+            com = pivot + np.einsum("bij,bj->bi", rot, self.com_arm0[d])
+            e[d] = bone_energy(b.mass[d], b.inertia[d], rot, com, vcom, w, -self.loads.g[2]) \
+                + self.debris.contact_energy()
+        return e
+
+    def poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each bone's rotation (B, 3, 3) relative to rest and pivot (B, 3) m:
+        the articulated body's, a broken-off part's its rigid body's."""
+        rot, pivot = self.bone_rot(), self.bone_pivot()
+        if self.debris.count:
+            rot, pivot = rot.copy(), pivot.copy()
+            d = self.debris.bones
+            rot[d], pivot[d], _, _ = self.debris.bone_poses()
+        return rot, pivot
 
     # ------------------------------------------------------------------
     # stepping
@@ -246,10 +285,10 @@ class ArticulatedTier:
             np.add.at(torque, bones, np.cross(arm, push))
         q, qd, k = self.q, self.qd, self.k
         tau = -k * (q + h * qd) - self.hold
-        armature = h * h * k
+        armature = h * h * k + self.armature
         past = self.past_cone()
         rate = self._damp_rate(h)
-        accelerations(self.dof_parent, self.frame_dof, self.same_limb, self.bones.mass, self.com,
+        accelerations(self.dof_parent, self.frame_dof, self.same_limb, self.mass, self.com,
                       self.inertia, self.axis, self.vel, self.bias, force, torque, tau, armature,
                       rate, self.loads.g, qd, past, h, CONE_OMEGA, CONE_DAMPING,
                       self.cone_stiffness, *self.work_arrays, self.qdd)
@@ -273,7 +312,7 @@ class ArticulatedTier:
         if not self.scene.ground:
             return None
         tip_z = self._tips_z()
-        near = np.nonzero(tip_z < self.contact_radius)[0]
+        near = np.nonzero((tip_z < self.contact_radius) & ~self.gone)[0]
         if not len(near):
             return None
         rot = self.bone_rot()[near]
@@ -336,6 +375,8 @@ class ArticulatedTier:
         self._kinematics()
         self.returning = 0.0
         self.before_blast = before_blast
+        self.taken = before_blast or self._state(first * h, "as the articulated tier took it",
+                                                 "taken", hand_back, work_start)
         handed_on = back = None
         force = np.zeros((n, 3))
         blast = False
@@ -359,7 +400,7 @@ class ArticulatedTier:
                     events.append(Event(t, tree.name, TIER, "", RETURN_DETAIL))
                     break
             elif step % self.force_every == 0:
-                samples.append((t, self.bone_rot().copy(), self.bone_pivot().copy()))
+                samples.append((t, *(a.copy() for a in self.poses())))
             self._check(t)
             leaving = self._leaving(t)
             if leaving is not None:
@@ -377,10 +418,15 @@ class ArticulatedTier:
                 parts = math.ceil(h / BLAST_STEP - 1e-9)
                 self.stats.split += 1
                 for k in range(parts):
-                    force = self._loads(t + k * h / parts, h / parts, load_work)
+                    t_k = t + k * h / parts
+                    force = self._loads(t_k, h / parts, load_work)
                     self.step(h / parts, force)
+                    self._step_debris(t_k, h / parts)
+                    self._break(t_k + h / parts, events)
             else:
                 self.step(h, force)
+                self._step_debris(t, h)
+                self._break(t + h, events)
             self.stats.steps += 1
             self.timing["update_seconds"] += t1 - t0
             self.timing["step_seconds"] += time.perf_counter() - t1
@@ -391,11 +437,14 @@ class ArticulatedTier:
                             np.array([e[2] for e in extra[0]]).reshape(-1, n, 3))
         st = self.stats
         notes = [split_note(st.split)] if st.split else []
+        if st.broken and handed_on is None:  # (handed on: the pymunk tier replays the blast)
+            notes.append(broken_note(st.broken, st.debris))
         timing = {k: round(v, 3) for k, v in self.timing.items()}
         timing.update(segment_steps=tree.rig.model.n_segments * st.steps,
                       **frame_timing(frame_seconds, spf))
         meta = {"step": h, "stats": {"steps": st.steps, "split": st.split, "updates": st.updates,
-                                     "limited": st.limited, "first_limit": st.first_limit}}
+                                     "limited": st.limited, "first_limit": st.first_limit,
+                                     "broken": st.broken, "debris": st.debris}}
         result = SolveResult({tree.name: motion}, None, meta, notes, {tree.name: "articulated"},
                              timing, back, handed_on)
         self.first_frame = math.ceil(first / spf - 1e-9)
@@ -403,8 +452,10 @@ class ArticulatedTier:
 
     def _record(self, f: int, quats: np.ndarray, pivots: np.ndarray, load_work: LoadWork) -> None:
         """Frame f's pose and the audit's energy (J) and pending work."""
-        quats[f] = quaternions_from_matrices(self.bone_rot())
-        pivots[f] = self.bone_pivot()
+        rot, pivots[f] = self.poses()
+        quats[f] = quaternions_from_matrices(rot)
+        self.ledger.add_work(np.array([self.debris.work.sum()]))
+        self.debris.work[:] = 0.0
         self.ledger.record(f, np.array([self.energy().sum() + self.contact_energy()]),
                            np.array([load_work.pending(self.com).sum()]))
 
@@ -412,15 +463,81 @@ class ArticulatedTier:
         """World loads (B, 3) N at the COMs held for `hold` s from t, capped
         (common.cap_loads), their work on the ledger."""
         b = self.bones
-        force = self.loads.forces(t, self.com, self.vcom(), self._axes(), b.props,
-                                  include_gravity=False, dt=hold)
+        on = np.nonzero(~self.gone)[0]  # (the parts broken off: their rigid bodies')
+        force = self.loads.forces(t, self.com[on], self.vcom()[on], self._axes()[on],
+                                  b.props.take(on), include_gravity=False, dt=hold)
         pulls = b.pull_forces(t)
         if pulls is not None:
-            force += pulls
-        force = cap_loads(force, b.mass, t, self.stats, self.locate, self.loads.blast_capped)
+            force += pulls[on]
+        force = cap_loads(force, b.mass[on], t, self.stats, lambda i: self.locate(int(on[i])),
+                          self.loads.blast_capped)
+        if len(on) < self.n:
+            rows, force = force, np.zeros((self.n, 3))
+            force[on] = rows
         self.ledger.add_work(np.array([load_work.update(force, self.com).sum()]))
         self.stats.updates += 1
         return force
+
+    def _step_debris(self, t: float, dt: float) -> None:
+        """The parts broken off over dt s from t: gravity, air and blasts on
+        their bones (capped), and the ground."""
+        if not self.debris.count:
+            return
+        d = self.debris.bones
+        props, mass = self.bones.props.take(d), self.bones.mass[d]
+
+        def loads(com, vcom, axis, start, hold):
+            force = self.loads.forces(t + start, com, vcom, axis, props, dt=hold)
+            return cap_loads(force, mass, t + start, self.stats,
+                             lambda i: self.locate(int(d[i])), self.loads.blast_capped)
+
+        self.debris.step(dt, loads)
+
+    def _break(self, t: float, events: list[Event]) -> None:
+        """Break, at t s, every joint past its strength (but the roots': the
+        tree goes to the pymunk tier, `_leaving`). The part a joint held
+        becomes a rigid body with its momentum (debris.py); its bones stay
+        in the articulated body without mass, springs, cones or damping and
+        still, each hinge with a unit armature (kg m^2) to keep the
+        algorithm regular, so the rest moves as if they were gone."""
+        moment = self.moments()
+        over = np.nonzero(self.breakable & (moment > self.bones.strength))[0]
+        if not len(over):
+            return
+        pose = {"rot": self.bone_rot(), "pivot": self.bone_pivot(), "com": self.com,
+                "vcom": self.vcom(), "omega": self.omega()}
+        paths = self.trees[0].rig.model.segment_paths()
+        for b in over:
+            if self.gone[b]:  # in a part broken off above it at this step
+                continue
+            part = self._outboard(int(b))
+            self.debris.add(part, pose)
+            self.gone[part] = True
+            self.breakable[part] = False
+            dof = np.concatenate([2 * part, 2 * part + 1])
+            self.k[dof] = self.hold[dof] = self.alpha[dof] = self.qd[dof] = 0.0
+            self.cone[dof] = np.inf
+            self.armature[dof] = 1.0
+            self.mass[part] = 0.0
+            self.inertia0[part] = 0.0
+            events.append(Event(t, self.trees[0].name, BROKE, paths[self.locate(int(b))[1]],
+                                f"{moment[b]:.0f} N m > strength "
+                                f"{self.bones.strength[b]:.0f} N m"))
+            self.stats.broken += 1
+            self.stats.debris += 1
+        self._rates.clear()
+        self._kinematics()
+
+    def _outboard(self, bone: int) -> np.ndarray:
+        """The bones (indices) of the part `bone` holds: it and all it
+        carries that has not broken off."""
+        part = np.zeros(self.n, dtype=bool)
+        part[bone] = True
+        parent = self.bones.parent
+        for b in range(bone + 1, self.n):  # parents precede children
+            if parent[b] >= 0 and part[parent[b]] and not self.gone[b]:
+                part[b] = True
+        return np.nonzero(part)[0]
 
     def locate(self, bone: int) -> tuple[str, int]:
         """The tree name and a segment index of a bone."""
@@ -446,11 +563,13 @@ class ArticulatedTier:
                                                    self.tip_arm)
 
     def _leaving(self, t: float) -> tuple[str, str] | None:
-        """(reason, kind) if an event needs the pymunk tier at t s, else None."""
+        """(reason, kind) if an event needs the pymunk tier at t s, else None:
+        the felling cut, or a root's joint near its strength (the others
+        break here)."""
         b = self.bones
         if self.cut_time[0] <= t + 0.5 * self.h:
             return "its felling cut", "cut"
-        near = self.moments() > BREAK_MARGIN * b.strength
+        near = (self.moments() > BREAK_MARGIN * b.strength) & ~self.breakable
         if not near.any():
             return None
         seg = self.locate(int(np.argmax(near)))[1]
@@ -466,8 +585,11 @@ class ArticulatedTier:
 
     def _hand_off(self, t: float, reason: str, kind: str, hand_back: float | None,
                   work_start: float) -> HandOff:
+        """Where the pymunk tier takes the tree: from where a blast under way
+        found it, or, once a part broke off, from where this tier took it
+        (`before_blast`: the pymunk tier replays what broke)."""
         ho = self._state(t, reason, kind, hand_back, work_start)
-        ho.before_blast = self.before_blast
+        ho.before_blast = self.taken if self.gone.any() else self.before_blast
         return ho
 
     def _keep_before_blast(self, t: float, blast: bool, hand_back: float | None,
@@ -484,8 +606,9 @@ class ArticulatedTier:
     def _back_in_range(self, t: float, h_linear: float) -> bool:
         """Whether the tree has stayed in the linear tier's range (with its
         margin: linear.in_return_range) for RETURN_WINDOW s up to t, every
-        blast's push past."""
-        if not self.loads.blasts_passed(t, self.com, self._axes(), self.bones.props):
+        blast's push past, and nothing broken off."""
+        if self.gone.any() or not self.loads.blasts_passed(t, self.com, self._axes(),
+                                                           self.bones.props):
             self.returning = 0.0
             return False
         ok = in_return_range(self.bones, self.bone_rot(), self.bone_pivot(), self.q, self.qd,

@@ -54,6 +54,14 @@ CONTACT_MARGIN = 0.05  # m: a tip this close to the ground (and below its rest h
 # already breaking; in parts of 1.3 ms it is handed over 2-3 ms before
 BLAST_SPLIT = 32
 BLAST_RING = 0.05  # s: a blast's twigs ring on this long after its push (50 Hz: 2.5 periods)
+# A blast's twigs ring on after its push at tens of Hz, which a
+# stiffness-implicit step damps by about pi f h: the nonlinear engines
+# (reference.py, articulated.py) split their step to at most BLAST_STEP from
+# a blast's arrival at a tree until BLAST_RING s after its push
+# (loads.blast_windows). The `explosion` preset's oak broke 2, 6, 7 and 7
+# joints on the reference with its blast windows at 1/2000, 1/16000, 1/32000
+# and 1/64000 s (docs/physics.md, "The step while a blast rings, converged")
+BLAST_STEP = 1 / 32000  # s
 # The trapezoidal rule's local error (Zienkiewicz & Xie: h^2/12 times the
 # change of acceleration over the step), carried to every bone's tip, per
 # step, as a fraction of its tree's height. Past ERROR_TOLERANCE the tier's

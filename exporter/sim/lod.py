@@ -34,7 +34,7 @@ from . import quality as quality_levels
 from .chains import StartState, Stats
 from .common import SimTree, TreeMotion, cap_note
 from .debris import MAX_SPIN
-from .events import TIER, Event
+from .events import BROKE, TIER, UPROOTED, Event
 from .linear import BLAST_SPLIT, ERROR_TOLERANCE, RETURNABLE, HandOff, LinearStats, LinearTier
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
@@ -48,10 +48,10 @@ from .solver import SolveResult, frame_timing
 # by that; at 960 and 60 Hz 1.4 %, at 960 and 120 Hz 0.7 %
 HIT_SUBSTEP_RATE = 960.0
 HIT_FORCE_RATE = 120.0
-# what the articulated tier takes (linear.HandOff kinds): large motion and
-# tips at the ground; a joint near breaking, a cut and projectiles need the
-# pymunk tier's breaks, debris and hits
-ARTICULATED_KINDS = ("turn", "cone", "ground")
+# what the articulated tier takes (linear.HandOff kinds): large motion, tips
+# at the ground and joints near breaking (it hands a root near breaking on);
+# a cut and projectiles need the pymunk tier's felling and hits
+ARTICULATED_KINDS = ("turn", "cone", "ground", "break")
 CHUNK_SEGMENTS = 2000  # segments per solver: big enough to amortise numpy, small to spread
 
 
@@ -125,9 +125,10 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         truth, where the planar chains lost one twig), and where a blast
         breaks branches the planar chains gained 0.1-3 % of energy the loads
         did not supply (sapling, 6-15 kg at 3-5 m), the reference none.
-        The articulated tier (no MuJoCo) takes large motion and tips at
-        the ground, in the same coordinates; what may break or is cut, and
-        trees a projectile can reach, go to the pymunk tier."""
+        The articulated tier (no MuJoCo) takes large motion, tips at the
+        ground and joints near breaking, in the same coordinates (it breaks
+        them as the reference does); what is cut, and trees a projectile can
+        reach, go to the pymunk tier."""
         if engine == "articulated":
             return "articulated" if kind in ARTICULATED_KINDS else "pymunk"
         if engine == "reference" and quality.nonlinear == "auto" and \
@@ -328,6 +329,9 @@ def _simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality,
         from `on` (or where a blast under way found it; work counted from
         the bake's start): the state it starts from and the reason given."""
         start, reason = from_blast(on, why)
+        if motions[i] is not None:  # what the articulated tier broke, the pymunk tier replays
+            motions[i].events = [e for e in motions[i].events
+                                 if e.kind not in (BROKE, UPROOTED) or e.time < start.time]
         handed.append(Event(start.time, trees[i].name, TIER, "", f"to pymunk: {reason}"))
         p_tier, _ = pymunk_from([(i, on, start)], frames)
         pym.append((p_tier, [i]))
@@ -574,6 +578,15 @@ class PlanarLOD:
             meta["articulated_step"] = min(r.meta["step"] for r in arts)
             for key in ("steps", "split", "updates"):
                 stats[f"articulated_{key}"] = sum(r.meta["stats"][key] for r in arts)
+            # what a run handed on broke, the pymunk tier replayed (and counted)
+            kept = [r.meta["stats"] for r in arts if r.handed_on is None]
+            broken, parts = sum(k["broken"] for k in kept), sum(k["debris"] for k in kept)
+            stats["broken"] += broken
+            stats["debris"] += parts
+            if broken:
+                from .articulated import broken_note
+
+                notes.append(broken_note(broken, parts))
             if stats["articulated_split"]:  # one note for all runs, the counts summed
                 from .articulated import split_note
 

@@ -150,7 +150,7 @@ from .common import (
 from .contact import FRICTION
 from .debris import MAX_SPIN, MIN_INERTIA_RATIO
 from .events import AT_REST, BROKE, CUT, HINGE, TIER, UPROOTED, Event
-from .linear import BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, in_return_range
+from .linear import BLAST_RING, BLAST_STEP, RETURN_DETAIL, RETURN_WINDOW, in_return_range
 from .loads import SceneLoads, meets
 from .projectiles import projectile_reaches
 from .quality import Quality
@@ -165,13 +165,6 @@ SETTLE_TIME = 0.5  # s
 TWIG_HZ = 50.0  # a twig's ringing under a blast front (the blast note's example)
 SPIN_PER_STEP = 0.05  # rad: most a free part turns in one step (more: the step is split)
 MAX_SUBSTEPS = 8
-# A blast's twigs ring on after its push at tens of Hz, which the
-# stiffness-implicit step damps by about pi f h: a model's step is split to
-# at most BLAST_STEP from a blast's arrival at its trees until BLAST_RING s
-# after its push (loads.blast_windows) has ended. The `explosion` preset's oak
-# broke 2, 6, 7 and 7 joints with its blast windows at 1/2000, 1/16000,
-# 1/32000 and 1/64000 s (docs/physics.md, "The step while a blast rings, converged")
-BLAST_STEP = 1 / 32000  # s
 PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solref)
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 IN_GROUND = 4  # contype of a capsule in the ground at rest: projectiles hit it, the ground not
