@@ -404,8 +404,8 @@ def test_a_violent_blast_breaks_as_many_joints_with_its_loads_updated_every_subs
     s; the uprooting not counted). Held over the load interval, the count
     hung on that interval: the reference broke 15 at its 2 ms, the LOD 20
     at 2.08 ms (23 at 2.5 ms). A model a blast splits now gets its loads
-    every substep: the reference breaks 19, the LOD 22 (the issue's bound:
-    within 25 %)."""
+    every substep: the reference broke 19, the LOD 22; with its joints let go
+    at the substep too, 18 and 21 (the issue's bound: within 25 %)."""
     pytest.importorskip("mujoco")
     scene = parse_scene({"duration": 0.7, "fps": 24,
                          "tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}],
@@ -493,9 +493,9 @@ def test_a_tree_the_pymunk_tier_takes_during_a_blast_gets_the_whole_push(root):
     assert handed and handed[0] <= 1.0 + 9.2 / 340, handed  # taken by the front at the latest
 
 
-@pytest.mark.xfail(strict=True, reason="issue 13's open miss: the pymunk tier breaks 9 of the "
-                   "blasted sapling's joints where the reference breaks 15, and its stem top "
-                   "peaks 29 % higher (docs/physics.md, 'Breaks at the substep')")
+@pytest.mark.xfail(strict=True, reason="the pymunk engine (nonlinear = 'pymunk') breaks 9 of "
+                   "the blasted sapling's joints where the reference breaks 15, and its stem "
+                   "top peaks 29 % higher (docs/physics.md, 'Breaks at the substep')")
 def test_the_pymunk_tier_moves_a_blasted_sapling_as_the_reference(root):
     """The stem top's peak on the pymunk tier within the issue's 25 % of the
     reference's. It was, at 31 % of the height against 26 %, while the

@@ -65,7 +65,7 @@ from .common import (
     sub_frame_samples,
 )
 from .contact import effective_mass, ground_forces, stored_energy
-from .debris import Debris
+from .debris import MAX_SPIN, Debris
 from .events import BROKE, TIER, Event
 from .featherstone import accelerations, kinematics
 from .layout import ChainLayout
@@ -100,10 +100,13 @@ def split_note(steps: int) -> str:
             f"pushed or its twigs rang (until {BLAST_RING:g} s after its push), on {steps} steps")
 
 
-def broken_note(broken: int, parts: int) -> str:
-    """The bake's note on joints the articulated tier broke."""
-    return (f"articulated tier: {broken} joints broke in blasts; {parts} parts fell off as "
-            "rigid debris")
+def broken_note(broken: int, parts: int, clamped: int) -> str:
+    """The bake's note on joints the articulated tier broke (`clamped`:
+    debris body substeps whose spin was clamped, debris.MAX_SPIN)."""
+    spin = f"; debris spin clamped at {MAX_SPIN:.0f} rad/s on {clamped} body substeps" \
+        if clamped else ""
+    return (f"articulated tier: {broken} joints broke; {parts} parts fell off as rigid "
+            f"debris{spin}")
 
 
 @dataclass
@@ -115,7 +118,7 @@ class ArticulatedStats:
     updates: int = 0  # load evaluations
     limited: int = 0  # bone updates whose load was capped (common.cap_loads)
     first_limit: tuple | None = None  # (tree, segment, time s, m/s^2)
-    broken: int = 0  # joints broken (in blasts)
+    broken: int = 0  # joints broken
     debris: int = 0  # parts broken off, each a rigid body
 
 
@@ -375,8 +378,9 @@ class ArticulatedTier:
         self._kinematics()
         self.returning = 0.0
         self.before_blast = before_blast
-        self.taken = before_blast or self._state(first * h, "as the articulated tier took it",
-                                                 "taken", hand_back, work_start)
+        self.taken = before_blast if before_blast is not None else \
+            self._state(first * h, "as the articulated tier took it", "taken", hand_back,
+                        work_start)
         handed_on = back = None
         force = np.zeros((n, 3))
         blast = False
@@ -438,13 +442,14 @@ class ArticulatedTier:
         st = self.stats
         notes = [split_note(st.split)] if st.split else []
         if st.broken and handed_on is None:  # (handed on: the pymunk tier replays the blast)
-            notes.append(broken_note(st.broken, st.debris))
+            notes.append(broken_note(st.broken, st.debris, self.debris.clamped))
         timing = {k: round(v, 3) for k, v in self.timing.items()}
         timing.update(segment_steps=tree.rig.model.n_segments * st.steps,
                       **frame_timing(frame_seconds, spf))
         meta = {"step": h, "stats": {"steps": st.steps, "split": st.split, "updates": st.updates,
                                      "limited": st.limited, "first_limit": st.first_limit,
-                                     "broken": st.broken, "debris": st.debris}}
+                                     "broken": st.broken, "debris": st.debris,
+                                     "debris_clamped": self.debris.clamped}}
         result = SolveResult({tree.name: motion}, None, meta, notes, {tree.name: "articulated"},
                              timing, back, handed_on)
         self.first_frame = math.ceil(first / spf - 1e-9)
@@ -550,11 +555,14 @@ class ArticulatedTier:
         w = self.omega()
         spin = np.einsum("bi,bi->b", w, w)
         bad = ~(spin <= MAX_ANGULAR_SPEED**2) | ~np.isfinite(self.com).all(1)
+        if self.debris.count:  # a part broken off: its rigid body's
+            bad[self.debris.bones] = ~np.isfinite(self.debris.x[self.debris.owner]).all(1)
         if not bad.any():
             return
         bone = int(np.argmax(bad))
+        fast = MAX_ANGULAR_SPEED**2 < spin[bone] < np.inf
         what = (f"angular speed {math.sqrt(spin[bone]):.0f} rad/s > {MAX_ANGULAR_SPEED:.0f}"
-                if np.isfinite(spin[bone]) else "non-finite state")
+                if fast else "non-finite state")
         raise SimulationError(f"{what} in the articulated tier", *self.locate(bone), t)
 
     def _tips_z(self) -> np.ndarray:
