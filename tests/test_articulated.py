@@ -208,6 +208,30 @@ def test_a_tree_near_breaking_goes_on_to_the_pymunk_tier_without_a_jump():
         assert step[f - 1:f + 1].max() < 1.5 * around, (e, step[f - 4:f + 4])
 
 
+def test_a_tree_whose_parts_broke_here_is_replayed_whole_by_the_pymunk_tier():
+    """A conifer in a 34 m/s vortex: the articulated tier takes it at 2.125 s
+    for a joint near breaking and breaks two limbs itself (4.89 and 4.94
+    s); then its root nears breaking at 5.0 s, which only the pymunk tier
+    handles. That tier takes the tree from where the articulated tier took
+    it, broken limbs whole, and replays what broke: no break is lost (a
+    start at 5.0 s would have put the limbs back on) or counted twice."""
+    scene = parse_scene({
+        "duration": 6.0, "fps": 24, "seed": 7, "quality": {"nonlinear": "articulated"},
+        "tree": [{"grammar": str(grammars_folder() / "forest" / "conifer.lsys")}],
+        "vortex": [{"start": [-40.0, -20.0], "velocity": [12.0, 6.0], "max_speed": 34.0,
+                    "core_radius": 20.0}]}, file="<test>")
+    bake = bake_scene(scene)
+    (tree,) = bake.trees
+    assert "then articulated, then pymunk" in tree.info["solver"], tree.info["solver"]
+    switches = [e for e in tree.info["events"] if e["kind"] == "tier"]
+    assert [e["detail"].split(":")[0] for e in switches] == ["to articulated", "to pymunk"]
+    assert switches[1]["time"] == switches[0]["time"], switches  # replayed from the take
+    broken = [e["segment"] for e in tree.info["events"] if e["kind"] in ("broke", "uprooted")]
+    assert len(broken) >= 10 and len(set(broken)) == len(broken), broken
+    assert bake.meta["stats"]["broken"] == len(broken), (bake.meta["stats"], len(broken))
+    assert bake.meta["energy"][tree.name]["max_gain_fraction"] < 0.02, bake.meta["energy"]
+
+
 def test_where_the_articulated_tier_fails_the_pymunk_tier_takes_the_tree(tmp_path, monkeypatch):
     """A non-finite state (forced here) stops the articulated tier with a
     SimulationError naming tree, segment and time, and the pymunk tier
