@@ -1167,7 +1167,8 @@ class ReferenceSolver:
         motions = {}
         for ti, tree in enumerate(self.trees):
             a, b = self.offsets[ti], self.offsets[ti + 1]
-            events = [e for e in self.events if e.tree == tree.name]
+            # (a joint released at a substep is recorded at the next check)
+            events = sorted((e for e in self.events if e.tree == tree.name), key=lambda e: e.time)
             extra = self.extra[ti]
             motions[tree.name] = TreeMotion(
                 quats[:, a:b], pivots[:, a:b], events, self.ledger.energy[:, ti],
