@@ -577,7 +577,7 @@ class ArticulatedTier:
         b = self.bones
         if self.cut_time[0] <= t + 0.5 * self.h:
             return "its felling cut", "cut"
-        near = (self.moments() > BREAK_MARGIN * b.strength) & ~self.breakable
+        near = (self.moments() > BREAK_MARGIN * b.strength) & (b.parent < 0)
         if not near.any():
             return None
         seg = self.locate(int(np.argmax(near)))[1]

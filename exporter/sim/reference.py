@@ -280,7 +280,9 @@ class _Group:
     # a blast splits the step: loads and damping are worked out every substep (_blast_step)
     blast: bool = False
     # while a blast splits the step: each joint's largest bending moment (N m)
-    # over the MuJoCo steps since the last break check (None: not tracked)
+    # over the MuJoCo steps since the last break check, for the closest-to-
+    # breaking record (a joint past its strength there is released at once,
+    # _release; None: not tracked)
     peak: np.ndarray | None = None
 
 
@@ -1324,8 +1326,8 @@ class ReferenceSolver:
             notes.append(f"reference: while a blast pushes and for {BLAST_RING:g} s after, the "
                          f"step is {h * 1e3:.4g} ms, which damps a twig ringing at {TWIG_HZ:g} Hz "
                          f"by about {math.pi * TWIG_HZ * h:.2g} (ratio), with the loads updated "
-                         "every step; breaks are checked against each joint's largest moment "
-                         "over those steps")
+                         "every step; a joint past its strength at any of those steps lets go "
+                         "there")
         if st.limited:
             notes.append(cap_note(st))
         stats = {"steps": st.steps, "updates": st.updates, "models": len(self.groups),
