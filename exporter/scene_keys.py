@@ -201,8 +201,8 @@ QUALITY = table(
     Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
         "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
         "installed, ground contact then pymunk and a cut as `cut_engine` says; else "
-        "`articulated`), `reference`, `articulated` (large motion, ground contact and breaking "
-        "in the articulated tier; uprooting, cuts and hits in pymunk) or `pymunk`",
+        "`articulated`), `reference`, `articulated` (large motion, ground contact, breaking and "
+        "uprooting in the articulated tier; cuts and hits in pymunk) or `pymunk`",
         kind="choice", choices=("auto", "reference", "articulated", "pymunk"),
         doc_default=_levels("nonlinear")),
     Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` "

@@ -63,6 +63,34 @@ def _dot(a, b):
 
 
 @njit(cache=True)
+def _solve(a, b, out):
+    """x with a x = b for a small square `a` (Gaussian elimination with
+    partial pivoting on copies; numba's np.linalg needs scipy)."""
+    n = len(b)
+    m = a.copy()
+    x = b.copy()
+    for c in range(n):
+        r = c
+        for i in range(c + 1, n):
+            if abs(m[i, c]) > abs(m[r, c]):
+                r = i
+        if r != c:
+            for j in range(n):
+                m[c, j], m[r, j] = m[r, j], m[c, j]
+            x[c], x[r] = x[r], x[c]
+        for i in range(c + 1, n):
+            f = m[i, c] / m[c, c]
+            for j in range(c, n):
+                m[i, j] -= f * m[c, j]
+            x[i] -= f * x[c]
+    for c in range(n - 1, -1, -1):
+        s = x[c]
+        for j in range(c + 1, n):
+            s -= m[c, j] * out[j]
+        out[c] = s / m[c, c]
+
+
+@njit(cache=True)
 def _turn(axis, angle, out):
     """Rotation matrix (3, 3) of `angle` rad about unit `axis` (Rodrigues)."""
     c, s = math.cos(angle), math.sin(angle)
@@ -118,12 +146,15 @@ def _force_cross(v, f, out):
 
 @njit(cache=True)
 def kinematics(q, qd, dof_parent, rest_axis, bone_parent, pivot0, com_arm0, inertia0,
-               rot, pivot, com, inertia, axis, vel, bias):
+               rot, pivot, com, inertia, axis, vel, bias, floating, base_rot, base_pivot,
+               base_vel):
     """Positions and velocities down the tree from hinge angles `q` and rates
     `qd` (D,): each dof's rotation relative to rest `rot` (D, 3, 3), pivot
     (D, 3), spatial axis (D, 6) and velocity (D, 6), its velocity-product
     acceleration `bias` (D, 6); each bone's COM (B, 3) and world inertia
-    about it (B, 3, 3)."""
+    about it (B, 3, 3). A root bone b `floating` (B,) (uprooted) hangs its
+    hinges on a free base: rotation `base_rot[b]` (3, 3) from rest, its
+    pivot at `base_pivot[b]` m, spatial velocity `base_vel[b]` (6,)."""
     arm = np.empty(3)
     turned = np.empty(3)
     s = np.empty(3)
@@ -134,7 +165,11 @@ def kinematics(q, qd, dof_parent, rest_axis, bone_parent, pivot0, com_arm0, iner
         b = i // 2
         if i % 2 == 0:
             pb = bone_parent[b]
-            if pb < 0:
+            if pb < 0 and floating[b]:
+                frame = base_rot[b]
+                pivot[i] = base_pivot[b]
+                v_parent = base_vel[b]
+            elif pb < 0:
                 frame = frame_eye
                 pivot[i] = pivot0[b]
                 v_parent = zero
@@ -171,7 +206,8 @@ def kinematics(q, qd, dof_parent, rest_axis, bone_parent, pivot0, com_arm0, iner
 @njit(cache=True)
 def accelerations(dof_parent, frame_dof, same_limb, mass, com, inertia, axis, vel, bias, force,
                   torque, tau, armature, damp_rate, gravity, qd, past, h, cone_omega, cone_zeta,
-                  cone_stiffness, art, art_bias, composite, momentum, qdd):
+                  cone_stiffness, art, art_bias, composite, momentum, qdd, floating, base_acc,
+                  base_inertia):
     """Hinge accelerations `qdd` (D,) rad/s^2 from the state `kinematics`
     left, world `force` (B, 3) N at the bones' COMs and `torque` (B, 3) N m
     about them, hinge torques `tau` (D,) N m and `armature` (D,) kg m^2
@@ -188,6 +224,13 @@ def accelerations(dof_parent, frame_dof, same_limb, mass, com, inertia, axis, ve
     `cone_omega` rad/s and damping ratio `cone_zeta` against the joint's
     articulated inertia, implicit over the step `h` s; the stiffness it
     had (N m/rad) goes to `cone_stiffness` (D,).
+
+    A root bone b `floating` (B,) hangs on a free base (see `kinematics`):
+    its spatial acceleration goes to `base_acc[b]` (6,), with gravity taken
+    as the rest's, as the base's upward acceleration (the true one is
+    base_acc[b] + (0, gravity)). The base is massless; what it carries is
+    the tree's articulated inertia through the root's first hinge, which
+    goes to `base_inertia[b]` (6, 6).
 
     Work arrays: art (D, 6, 6), art_bias (D, 6), composite (D, 6, 6),
     momentum (D, 6)."""
@@ -247,12 +290,16 @@ def accelerations(dof_parent, frame_dof, same_limb, mass, com, inertia, axis, ve
         d[i] += armature[i]
         u[i] = tau[i] - _dot(axis[i], art_bias[i])
         p = dof_parent[i]
-        if p < 0:
+        if p < 0 and not floating[i // 2]:
             continue
         for j in range(6):
             for k in range(6):
                 art[i, j, k] -= u_vec[j] * u_vec[k] / d[i]
         _mat_vec(art[i], bias[i], tmp)
+        if p < 0:  # the free base's own equation: I_A a + p_A = 0
+            base_inertia[i // 2] = art[i]
+            _solve(art[i], -(art_bias[i] + tmp + u_vec * (u[i] / d[i])), base_acc[i // 2])
+            continue
         art[p] += art[i]
         art_bias[p] += art_bias[i] + tmp + u_vec * (u[i] / d[i])
     # outward: accelerations (the base accelerates up at g: gravity)
@@ -261,6 +308,9 @@ def accelerations(dof_parent, frame_dof, same_limb, mass, com, inertia, axis, ve
     base[3:] = -gravity
     for i in range(n):
         p = dof_parent[i]
-        a = base + bias[i] if p < 0 else acc[p] + bias[i]
+        if p < 0:
+            a = (base_acc[i // 2] if floating[i // 2] else base) + bias[i]
+        else:
+            a = acc[p] + bias[i]
         qdd[i] = (u[i] - _dot(big_u[i], a)) / d[i]
         acc[i] = a + axis[i] * qdd[i]

@@ -572,7 +572,7 @@ class PlanarLOD:
             notes.append(f"nonlinear engines: the articulated tier and pymunk for {fallback} "
                          f"tree{'s' if fallback > 1 else ''}, as MuJoCo is not installed "
                          "(pip install 'treebake[reference]': the reference, more accurate "
-                         "for uprooting, hits and felling)")
+                         "for hits and felling)")
         if arts:
             meta["articulated_runs"] = len(arts)
             meta["articulated_step"] = min(r.meta["step"] for r in arts)
@@ -587,7 +587,9 @@ class PlanarLOD:
                 from .articulated import broken_note
 
                 notes.append(broken_note(broken, parts,
-                                         sum(k["debris_clamped"] for k in kept)))
+                                         sum(k["debris_clamped"] for k in kept),
+                                         sum(k["uprooted"] for k in kept),
+                                         sum(k["twist_raised"] for k in kept)))
             if stats["articulated_split"]:  # one note for all runs, the counts summed
                 from .articulated import split_note
 
