@@ -1,6 +1,7 @@
 """Events on both solvers: does a cut, a hit or a blast create energy?
 
-For each preset (felling, boxes, explosion) and the 50 kg blast at 3 m from a sapling,
+For each preset (felling, boxes, explosion; hurricane and tornado when asked)
+and the 50 kg blast at 3 m from a sapling,
 bake with the planar LOD and with the MuJoCo reference and measure from the
 bakes alone (independent of either solver's bookkeeping):
 
@@ -17,7 +18,8 @@ bakes alone (independent of either solver's bookkeeping):
 - felling: time from the cut to the stem touching the ground, resting
   azimuth of the stem; boxes: the highest point a box reaches after a hit.
 
-    python bench/events.py [--cases felling boxes explosion blast] [--solvers planar full]
+    python bench/events.py [--cases felling boxes explosion blast hurricane tornado]
+                           [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
                            [--quality final]      # the LOD's level (default: the scene's)
                            [--engine articulated] # the LOD's nonlinear engine without MuJoCo
@@ -103,6 +105,7 @@ def measure(bake, scene) -> dict:
             "com_max_after_start": round(float(en["com"][1:, 2].max()), 3),
             "com_end": round(float(en["com"][-1, 2]), 3),
             "broken": broken, "events": [Event.from_record(e).text() for e in events][:6],
+            "uprooted": sum(1 for e in events if e["kind"] == "uprooted"),
             "farthest_part_m": round(reach, 2),
             "peak_displacement_pct": round(100 * float(moved.max()) / tb.height, 2),
             # the tree's own sway: the parts still on it (a falling twig's
@@ -122,6 +125,9 @@ CASES = {
     "felling": lambda: load_scene(ROOT / "presets" / "felling.toml"),
     "boxes": lambda: load_scene(ROOT / "presets" / "boxes.toml"),
     "explosion": lambda: load_scene(ROOT / "presets" / "explosion.toml"),
+    # (wind that uproots: not in the default run)
+    "hurricane": lambda: load_scene(ROOT / "presets" / "hurricane.toml"),
+    "tornado": lambda: load_scene(ROOT / "presets" / "tornado.toml"),
     "blast": lambda: parse_scene({
         "name": "blast50", "duration": 5.0, "fps": 24.0,
         "tree": [{"grammar": str(ROOT / "grammars" / "sapling.lsys")}],
@@ -132,7 +138,8 @@ CASES = {
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--cases", nargs="*", default=["felling", "boxes", "explosion", "blast"],
+                    choices=list(CASES))
     ap.add_argument("--solvers", nargs="*", default=["planar", "full"])
     ap.add_argument("--timestep", type=Fraction, default=None,
                     help="the full reference's step, s (e.g. 1/64000; default: its own)")
@@ -140,7 +147,7 @@ def main() -> None:
                     help="the planar LOD's level (default: the scene's own)")
     ap.add_argument("--engine", choices=["auto", "articulated", "pymunk"], default="auto",
                     help="the planar LOD's nonlinear engine: auto (MuJoCo when installed), "
-                         "articulated (with pymunk for breaks, cuts and hits: what an install "
+                         "articulated (with pymunk for cuts and hits: what an install "
                          "without the `reference` extra runs) or pymunk")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
@@ -177,6 +184,11 @@ def main() -> None:
                           f"resting azimuth {t['azimuth_deg']:.1f} deg")
                 for e in t["events"]:
                     print(f"{'':<17}{e}")
+            if len(m["trees"]) > 4:
+                gains = [t["audit"].get("max_gain_fraction", 0) for t in m["trees"]]
+                print(f"{case:<8} {label:<7} all      broken {sum(t['broken'] for t in m['trees'])}"
+                      f" (uprooted {sum(t['uprooted'] for t in m['trees'])})  worst audit gain "
+                      f"{max(gains):.2%}", flush=True)
             closest = bake.meta.get("stats", {}).get("closest_to_breaking")
             m["closest_to_breaking"] = closest
             if closest:  # the reference's (the LOD's tiers do not keep it)
