@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import compose, matrices_from_rotvec, quaternions_from_matrices
+from ..rotations import compose, cross, matrices_from_rotvec, quaternions_from_matrices
 from ..scene import Scene
 from .audit import Ledger, LoadWork, bone_energy
 from .common import (
@@ -104,6 +104,13 @@ FROZEN = 1e12
 # and any explicit term on that spin (a tip's friction as it lands) ran away
 # at 1/480 s. The spin of a round stem about its axis does not show.
 TWIST_FLOOR = 0.01
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """The matrices (..., 3, 3) of v x (.) for vectors v (..., 3)."""
+    out = np.zeros(v.shape + (3,))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return out - np.swapaxes(out, -1, -2)
 
 
 def split_note(steps: int) -> str:
@@ -268,7 +275,7 @@ class ArticulatedTier:
     def vcom(self) -> np.ndarray:
         """Each bone's COM velocity (B, 3) m/s (its spatial velocity at the COM)."""
         v = self.vel[1::2]
-        return v[:, 3:] + np.cross(v[:, :3], self.com)
+        return v[:, 3:] + cross(v[:, :3], self.com)
 
     def _axes(self) -> np.ndarray:
         """Each bone's unit axis (B, 3) now."""
@@ -357,10 +364,9 @@ class ArticulatedTier:
             middle = np.array([self._centre(r) for r in fl])
             self._move_bases(fl, rot0, pivot0, centre, middle, h)
         self.q = q + h * self.qd
-        self._kinematics()
-        if len(fl):
+        if len(fl):  # (its own pass at the new angles, the bases at rest)
             self._base_velocity(fl, self.q)
-            self._kinematics()
+        self._kinematics()
 
     def _base_velocity(self, fl: np.ndarray, q: np.ndarray) -> None:
         """Set the free bases `fl`' velocities so that their trees, at angles
@@ -383,7 +389,7 @@ class ArticulatedTier:
         tree thrown at 19 m/s and 6 rad/s left its line by 7 cm in 0.5 s)."""
         w, v_origin = self.base_vel[fl, :3], self.base_vel[fl, 3:]
         turn = matrices_from_rotvec(w * dt)
-        shift = dt * (v_origin + np.cross(w, at))
+        shift = dt * (v_origin + cross(w, at))
         self.base_pivot[fl] = centre + shift + np.einsum("bij,bj->bi", turn, pivot0 - centre)
         self.base_rot[fl] = compose(turn, rot0)
 
@@ -396,9 +402,7 @@ class ArticulatedTier:
         """The bones `rows`' spatial inertia (6, 6) at the origin, as one
         rigid body (kg m^2, kg m, kg)."""
         m, c = self.mass[rows], self.com[rows]
-        skew = np.zeros((len(rows), 3, 3))
-        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -c[:, 2], c[:, 1], -c[:, 0]
-        skew -= skew.transpose(0, 2, 1)
+        skew = _skew(c)
         out = np.zeros((6, 6))
         out[:3, :3] = (self.inertia[rows] - m[:, None, None] * skew @ skew).sum(0)
         out[:3, 3:] = (m[:, None, None] * skew).sum(0)
@@ -411,7 +415,7 @@ class ArticulatedTier:
         about it (N m s), linear (N s)."""
         w = self.vel[2 * rows + 1, :3]
         linear = self.mass[rows, None] * self.vcom()[rows]
-        angular = np.einsum("bij,bj->bi", self.inertia[rows], w) + np.cross(self.com[rows], linear)
+        angular = np.einsum("bij,bj->bi", self.inertia[rows], w) + cross(self.com[rows], linear)
         return np.concatenate([angular.sum(0), linear.sum(0)])
 
     def _wrench(self, root: int, force: np.ndarray, torque: np.ndarray) -> np.ndarray:
@@ -420,7 +424,7 @@ class ArticulatedTier:
         `torque` (B, 3) N m about them."""
         rows = self.tree_rows[root]
         f = force[rows] + self.mass[rows, None] * self.loads.g
-        moment = torque[rows].sum(0) + np.cross(self.com[rows], f).sum(0)
+        moment = torque[rows].sum(0) + cross(self.com[rows], f).sum(0)
         return np.concatenate([moment, f.sum(0)])
 
     def _damp_rate(self, h: float) -> np.ndarray:
@@ -458,10 +462,7 @@ class ArticulatedTier:
             # yields most (a culm standing up is its whole mass pushed up,
             # a quarter of it pushed sideways: friction tuned to the first
             # spun an uprooted bamboo culm to 3000 rad/s)
-            push = np.zeros((6, 3))  # spatial forces at the origin of unit forces there
-            push[3:] = np.eye(3)
-            x, y, z = points[k]
-            push[:3] = [[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]  # (p x f)
+            push = np.vstack([_skew(points[k]), np.eye(3)])  # unit forces there, at the origin
             mobility = push.T @ np.linalg.solve(self.base_inertia[r], push)
             m_eff[k] = 1.0 / float(np.linalg.eigvalsh(mobility)[-1])
         return bones, points, arm, vel, radius, m_eff
@@ -473,9 +474,7 @@ class ArticulatedTier:
         least moment whatever the direction, it was the tip's mass pushed
         round the bone's own axis: a palm's fronds landed on springs so soft
         that 32 of its joints broke where the reference breaks 100.)"""
-        skew = np.zeros((len(near), 3, 3))
-        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -arm[:, 2], arm[:, 1], -arm[:, 0]
-        skew -= skew.transpose(0, 2, 1)
+        skew = _skew(arm)
         mobility = np.eye(3) / self.bones.mass[near][:, None, None] \
             + skew.transpose(0, 2, 1) @ np.linalg.inv(self.inertia[near] + 1e-12 * np.eye(3)) @ skew
         return 1.0 / np.linalg.eigvalsh(mobility)[:, -1]
@@ -736,11 +735,9 @@ class ArticulatedTier:
         root bone; the base's velocity then carries the same momentum (the
         spin slows: no energy is made)."""
         rows = self.tree_rows[root]
-        spatial = self._spatial_inertia(rows)
-        mass = spatial[3, 3]
-        c = np.array([spatial[2, 4], spatial[0, 5], spatial[1, 3]]) / mass  # COM, m
-        skew = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
-        values, axes = np.linalg.eigh(spatial[:3, :3] + mass * skew @ skew)  # about the COM
+        skew = _skew(self._centre(root))  # (the origin to the centre)
+        about_centre = self._spatial_inertia(rows)[:3, :3] + self.mass[rows].sum() * skew @ skew
+        values, axes = np.linalg.eigh(about_centre)
         short = TWIST_FLOOR * values[2] - values[0]  # kg m^2
         if short <= 0.0:
             return
