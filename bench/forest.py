@@ -96,7 +96,7 @@ def calibrate(log=print) -> dict:
 
     from treebake.pipeline import bake_scene
     from treebake.scene import parse_scene
-    from treebake.sim.quality import QUALITIES
+    from treebake.quality import QUALITIES
 
     with tempfile.TemporaryDirectory() as tmp:
         raw = forest_scene(50, 4.0, culled=False)

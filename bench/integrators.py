@@ -37,7 +37,7 @@ def main() -> None:
 
     import treebake.sim.linear as linear
     from treebake.pipeline import bake_scene
-    from treebake.sim.quality import QUALITIES
+    from treebake.quality import QUALITIES
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", nargs="*", default=["spruce", "oak"])

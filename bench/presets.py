@@ -26,7 +26,7 @@ from treebake.fileio import write_text
 from treebake.pipeline import bake_scene
 from treebake.scene import load_scene
 from treebake.sim.events import BROKE, UPROOTED
-from treebake.sim.quality import QUALITIES
+from treebake.quality import QUALITIES
 
 
 def bench(path: Path, quality: str | None, solver: str = "planar", engine: str = "auto") -> dict:

@@ -107,7 +107,7 @@ def run_one(job: str, setting: str, out: Path) -> dict:
     started = time.process_time()  # the interpreter and this script's imports (numpy)
     from treebake.bake import save_bake
     from treebake.pipeline import bake_scene
-    from treebake.sim.quality import QUALITIES
+    from treebake.quality import QUALITIES
     if setting.startswith("lod") or setting == "pymunk":
         from treebake.sim import lod  # noqa: F401 (imported by the bake: counted here)
     else:

@@ -25,13 +25,14 @@ import io
 import json
 import zipfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
 from .fileio import atomic_path
+from .rotations import qrotate
 
 FORMAT_VERSION = 1
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
@@ -144,6 +145,41 @@ class Bake:
     def frame(self, tree: TreeBake, f: int) -> int:
         """Index into a tree's frames (static trees have only frame 0)."""
         return 0 if tree.static else f
+
+
+def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None):
+    """Per-segment base positions (F, S, 3) m and rotations (F, S, 4) x y z
+    w from per-bone motion (rotations relative to rest (F, B, 4), pivots
+    (F, B, 3) m; None: the rest pose, one frame); segments of a merged bone
+    move with it."""
+    model = rig.model
+    sb = rig.seg_bone
+    rest_base = model.points[model.seg_start]
+    if quats is None:
+        rot = np.tile([0.0, 0.0, 0.0, 1.0], (1, model.n_segments, 1))
+        return rest_base[None].copy(), rot
+    q = quats[:, sb]  # (F, S, 4)
+    # each segment's base turned about its bone's pivot (rotating the one
+    # vector by the quaternion: no matrices)
+    pos = pivots[:, sb] + qrotate(q, rest_base - rig.pivot[sb])
+    return pos, q
+
+
+def tree_bake_from_motion(model, rig, motion, info: dict) -> TreeBake:
+    """A tree's bake from its rig's motion (sim.common.TreeMotion; None: it
+    stands still), with `info` (grammar, seed, events, ...)."""
+    if motion is None:
+        pos, rot = segment_transforms(rig, None, None)
+        return tree_bake_from_model(model, pos, rot, info)
+    pos, rot = segment_transforms(rig, motion.quaternions, motion.pivots)
+    tb = tree_bake_from_model(model, pos, rot, info)
+    if len(motion.extra_times):  # fast turns: sub-frame samples
+        extra_pos, extra_rot = segment_transforms(rig, motion.extra_quaternions,
+                                                  motion.extra_pivots)
+        tb = replace(tb, extra_times=motion.extra_times,
+                     extra_positions=extra_pos.astype(np.float32),
+                     extra_rotations=extra_rot.astype(np.float32))
+    return tb
 
 
 def tree_bake_from_model(model, positions: np.ndarray, rotations: np.ndarray,

@@ -38,7 +38,7 @@ from .scene_keys import (
     WIND,
 )
 from .settings import Key
-from .sim.quality import QUALITIES, Quality
+from .quality import QUALITIES, Quality
 
 __all__ = ["BEAUFORT", "Scene", "load_job", "load_scene", "parse_scene"]
 

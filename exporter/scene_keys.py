@@ -9,7 +9,7 @@ import math
 
 from .names import MAX_TREE_NAME
 from .settings import Key, markdown, table
-from .sim.quality import QUALITIES, Quality
+from .quality import QUALITIES, Quality
 
 BEAUFORT = {  # m/s, lower bounds (WMO)
     "calm": 0.0, "light air": 0.3, "light breeze": 1.6, "gentle breeze": 3.4,
@@ -198,20 +198,17 @@ QUALITY = table(
         "and the rates' lever arms again at the trees' mean pose (over about 0.5 s) once a "
         "bone of it has turned this far from the pose they were taken at", "rad", None, 0.01,
         10.0, doc_default=_levels("relinearise")),
-    Key("nonlinear", "the engine for trees that leave the linear range (in wind, near "
-        "breaking) or that a projectile can reach: `auto` (the reference when MuJoCo is "
-        "installed, ground contact then pymunk and a cut as `cut_engine` says; else "
-        "`articulated`), `reference`, `articulated` (large motion, ground contact, breaking and "
-        "uprooting in the articulated tier; cuts and hits in pymunk) or `pymunk`",
-        kind="choice", choices=("auto", "reference", "articulated", "pymunk"),
-        doc_default=_levels("nonlinear")),
-    Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` "
-        "(robust at any step) or `nonlinear` (the reference when installed)",
-        kind="choice", choices=("pymunk", "nonlinear"), doc_default=_levels("cut_engine")),
-    Key("reference_step", "the reference's step when it is the nonlinear engine", "s", None,
-        1e-5, 1 / 60, doc_default=_levels("reference_step")),
-    Key("articulated_step", "the articulated tier's step (whole `substep_rate` steps)", "s",
-        None, 1e-5, 1 / 60, doc_default=_levels("articulated_step")),
+    Key("nonlinear", "the engine for trees that leave the linear range or that a projectile "
+        "can reach: `auto` (the engine table of docs/physics.md: the reference for large "
+        "motion, a joint near breaking and projectiles; the pymunk tier for ground contact; a "
+        "cut as `cut_engine` says), `reference` (MuJoCo for every reason) or `pymunk` (the "
+        "pymunk tier for every reason)",
+        kind="choice", choices=("auto", "reference", "pymunk"), doc_default=_levels("nonlinear")),
+    Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` or "
+        "`reference`", kind="choice", choices=("pymunk", "reference"),
+        doc_default=_levels("cut_engine")),
+    Key("reference_step", "the reference's step when it takes a tree from the linear tier",
+        "s", None, 1e-5, 1 / 60, doc_default=_levels("reference_step")),
     Key("substep_rate", "physics steps per second (split further, automatically, during "
         "blasts, hits and fast spins)", "Hz", None, 60.0, 100_000.0,
         doc_default=_levels("substep_rate")),
@@ -232,11 +229,6 @@ QUALITY = table(
         "apparent mass of a base-driven oscillator) or `rigid` (their plain mass)",
         kind="choice", choices=("apparent", "rigid"), doc_default=_levels("coupling")),
 )
-
-
-def quality_default(base: Quality, key: str):
-    """A quality key's default: the base level's value."""
-    return getattr(base, key)
 
 
 TABLES = {"scene": TOP, "scene.tree": TREE, "scene.forest": FOREST, "scene.wind": WIND,

@@ -121,11 +121,11 @@ class SpeciesCheck:
 
 
 def grown_rig(grammar: str | Path, seed: int | None = None, quality: str = "default") -> Rig:
-    """The grammar's tree grown as a scene grows it (pipeline.grow) and
-    rigged as pipeline.prepare rigs it at `quality`, standing at the origin."""
-    from .pipeline import grow
+    """The grammar's tree grown as a scene grows it (grow.grow) and
+    rigged as sim.rigging rigs it at `quality`, standing at the origin."""
+    from .grow import grow
     from .scene import parse_scene
-    from .sim.quality import QUALITIES
+    from .quality import QUALITIES
 
     tree = {"grammar": str(Path(grammar).resolve())}
     if seed is not None:

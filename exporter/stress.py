@@ -55,7 +55,7 @@ from .rotations import angle_between
 from .scene import parse_scene
 from .sim.audit import GAIN_TOLERANCE
 from .sim.events import BROKE, CUT, UPROOTED
-from .sim.quality import QUALITIES
+from .quality import QUALITIES
 from .sway import segment_ends
 
 ENERGY_TOLERANCE = 0.10  # a window's peak kinetic energy may exceed the previous one's by 10 %

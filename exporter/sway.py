@@ -82,10 +82,11 @@ def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "d
     """Pull the trunk at `at` x height until its top has moved about
     `deflection` x height, release at `release` s, and measure the free
     sway of the trunk top in the pull's direction (still air, gravity on)."""
-    from .pipeline import bake_scene, grow
+    from .grow import grow
+    from .pipeline import bake_scene
     from .rig import RigOptions, build_rig
     from .scene import parse_scene
-    from .sim.quality import QUALITIES
+    from .quality import QUALITIES
 
     tree = {"grammar": str(Path(grammar).resolve())}
     if seed is not None:

@@ -9,13 +9,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from treebake.pipeline import bake_scene, grow, prepare
+from treebake.grow import grow
+from treebake.pipeline import bake_scene
+from treebake.sim.rigging import rig_scene
 from treebake.scene import parse_scene
 from treebake.sim.common import Bones
 from treebake.sim.joint_space import JointSpace
 from treebake.sim.layout import ChainLayout
 from treebake.sim.loads import SceneLoads
-from treebake.sim.quality import QUALITIES
+from treebake.quality import QUALITIES
 from treebake.sim.treefactor import TreeFactor, ancestor_table, depths
 from treebake.sim.treesums import ChainSums
 
@@ -27,7 +29,7 @@ def system(grammar: str | Path, count: int = 1) -> JointSpace:
              for i in range(count)]
     scene = parse_scene({"tree": trees, "wind": {"speed": 5.0}}, file="<test>")
     loads = SceneLoads(scene)
-    sim, _, _, _ = prepare(scene, grow(scene), loads, QUALITIES["final"])
+    sim = rig_scene(scene, grow(scene), loads, QUALITIES["final"]).trees
     bones = Bones.of(sim)
     layout = ChainLayout.of(sim, bones.offsets, bones.pivot0, bones.tip0)
     return JointSpace(bones, layout, loads.g, 0.01, 1e-4)

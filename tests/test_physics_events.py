@@ -10,7 +10,7 @@ from simkit import tip
 
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
-from treebake.sim.quality import QUALITIES
+from treebake.quality import QUALITIES
 from treebake.stress import kinetic_energy
 from treebake.sway import segment_ends
 

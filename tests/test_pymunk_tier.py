@@ -8,12 +8,13 @@ import sys
 
 import numpy as np
 
-from treebake.pipeline import grow, prepare
+from treebake.grow import grow
+from treebake.sim.rigging import rig_scene
 from treebake.rotations import rotvecs_from_matrices
 from treebake.scene import parse_scene
 from treebake.sim.chains import PymunkTier
 from treebake.sim.loads import SceneLoads
-from treebake.sim.quality import QUALITIES
+from treebake.quality import QUALITIES
 
 # a stem of four segments with a heavy side branch on its second
 GRAMMAR = ("density: 800\nmodulus: 8e9\ndamping: 0.05\n"
@@ -27,7 +28,7 @@ def _tier(tmp_path, grammar: str) -> PymunkTier:
     scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
                          "wind": {"speed": 5.0}}, file="<test>")
     loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
-    trees, _, _, _ = prepare(scene, grow(scene), loads, QUALITIES["default"])
+    trees = rig_scene(scene, grow(scene), loads, QUALITIES["default"]).trees
     tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
     tier.begin()
     return tier

@@ -13,7 +13,7 @@ from simkit import BARE, bake_text, tip
 
 from treebake.accuracy import case_scene
 from treebake.pipeline import bake_scene
-from treebake.sim.quality import QUALITIES
+from treebake.quality import QUALITIES
 from treebake.sway import frequency, segment_ends
 
 E, RHO = 8.0e9, 800.0  # green wood, Pa and kg/m^3

@@ -210,12 +210,13 @@ def test_non_finite_loads_are_reported(root, monkeypatch):
 
 def test_timestep_and_force_rate_options(root):
     """Coarser steps for the accuracy report: whole force intervals per frame."""
-    from treebake.pipeline import grow, prepare
+    from treebake.grow import grow
+    from treebake.sim.rigging import rig_scene
     from treebake.sim.loads import SceneLoads
 
     scene = parse_scene(calm(str(root / "grammars" / "sapling.lsys")), file="<test>")
     loads = SceneLoads(scene)
-    trees = prepare(scene, grow(scene), loads, None)[0]
+    trees = rig_scene(scene, grow(scene), loads, None).trees
     for name, h in reference.TIMESTEPS.items():
         solver = reference.ReferenceSolver(trees, scene, scene.quality, loads, timestep=h,
                                            force_rate=240.0)
@@ -307,7 +308,8 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
     free joint changes MuJoCo's sparse layout)."""
     import mujoco
 
-    from treebake.pipeline import grow, prepare
+    from treebake.grow import grow
+    from treebake.sim.rigging import rig_scene
     from treebake.sim.loads import SceneLoads
 
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 1.0,
@@ -315,7 +317,7 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
                            "velocity": [3.0, 0, 1.0]}]}
     scene = parse_scene(raw, file="<test>")
     loads = SceneLoads(scene)
-    trees = prepare(scene, grow(scene), loads, None)[0]
+    trees = rig_scene(scene, grow(scene), loads, None).trees
     solver = reference.ReferenceSolver(trees, scene, scene.quality, loads)
     (g,) = solver.groups
     m, d = g.model, g.data

@@ -64,12 +64,32 @@ def cap_loads(force: np.ndarray, mass: np.ndarray, t: float, stats,
     return force
 
 
-def cap_note(stats) -> str | None:
-    """The bake note for capped loads, or None if none were capped."""
-    if not stats.limited:
+def external_loads(loads, bones: Bones, t: float, com: np.ndarray, vcom: np.ndarray,
+                   axis: np.ndarray, stats, locate_row: Callable[[int], tuple[str, int]],
+                   rows: np.ndarray | None = None, dt: float = 0.0,
+                   blast_start: float | None = None, gravity: bool = False) -> np.ndarray:
+    """The loads every engine applies to `rows` of `bones` (all: None) at
+    t s, with their COMs at `com` (m), moving at `vcom` (m/s), along unit
+    `axis`: air, blasts (held over `dt` s, SceneLoads.forces), attractors,
+    the scene's pulls, and gravity where asked; capped at MAX_ACCELERATION
+    x mass (cap_loads, counted on `stats`). World forces (N) at the COMs."""
+    props = bones.props if rows is None else bones.props.take(rows)
+    force = loads.forces(t, com, vcom, axis, props, include_gravity=gravity, dt=dt,
+                         blast_start=blast_start)
+    pulls = bones.pull_forces(t)
+    if pulls is not None:
+        force += pulls if rows is None else pulls[rows]
+    mass = bones.mass if rows is None else bones.mass[rows]
+    return cap_loads(force, mass, t, stats, locate_row, loads.blast_capped)
+
+
+def cap_note(limited: int, first_limit: tuple | None) -> str | None:
+    """The bake's note on capped loads (`limited` bone updates, the first
+    as (tree, segment, time s, m/s^2)); None if none were capped."""
+    if not limited:
         return None
-    tree, seg, t, acc = stats.first_limit
-    return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {stats.limited} bone updates "
+    tree, seg, t, acc = first_limit
+    return (f"loads capped at {MAX_ACCELERATION:.0f} m/s^2 on {limited} bone updates "
             f"(first: tree {tree!r}, segment {seg}, t = {t:.3f} s, {acc:.0f} m/s^2): the "
             "motion there is milder than the load asks (a blast's impulse is kept: what the "
             "cap holds back follows at the same rate)")
@@ -130,6 +150,19 @@ class TreeMotion:
     extra_pivots: np.ndarray | None = None
 
 
+def tree_motion(quats: np.ndarray, pivots: np.ndarray, bones: slice, events: list, ledger,
+                tree: int, extra: list) -> TreeMotion:
+    """One tree's TreeMotion from an engine's records: its `bones` of the
+    frames' rotations (F, B, 4) and pivots (F, B, 3), its events, its row
+    `tree` of the audit's `ledger`, and its kept sub-frame samples `extra`
+    [(time s, rotations (b, 4), pivots (b, 3))]."""
+    nb = bones.stop - bones.start
+    return TreeMotion(quats[:, bones], pivots[:, bones], events, ledger.energy[:, tree],
+                      ledger.work[:, tree], np.array([e[0] for e in extra]),
+                      np.array([e[1] for e in extra]).reshape(-1, nb, 4),
+                      np.array([e[2] for e in extra]).reshape(-1, nb, 3))
+
+
 FAST_TURN = np.radians(45.0)  # rad: a bone turning more between frames gets sub-frame samples
 MAX_EXTRA = 8  # sub-frame samples per frame at most
 
@@ -153,6 +186,18 @@ def sub_frame_samples(prev: np.ndarray, cur: np.ndarray, samples: list, offsets:
             for t, rot, piv in pick:
                 store[ti].append((t, quaternions_from_matrices(rot[lo:hi]), piv[lo:hi].copy()))
 
+
+
+@dataclass
+class ProjectileTracks:
+    """Thrown objects' flight: shape ("box" or "sphere"), size (box edge or
+    sphere diameter, m), and per frame world position (F, P, 3) m and
+    rotation (F, P, 4) x y z w."""
+
+    shapes: list[str]
+    sizes: np.ndarray
+    positions: np.ndarray
+    rotations: np.ndarray
 
 
 @dataclass

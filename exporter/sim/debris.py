@@ -13,24 +13,22 @@ import numpy as np
 
 from ..rotations import apply, compose, cross, matrices_from_rotvec
 from .contact import Sunk, effective_mass, ground_forces, stored_energy
+from .rules import MAX_SPIN, SETTLE_TIME, floored_inertia
 
 MAX_STEP = 1 / 480  # s, the longest rigid-body step (a force update is split into these)
 ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
 SLEEP_SPEED = 0.02  # m/s and rad/s below which a grounded body may sleep
-SLEEP_TIME = 0.5  # s at rest on the ground before it sleeps
-MIN_INERTIA_RATIO = 0.1  # smallest principal moment / largest
-MAX_SPIN = 100.0  # rad/s: debris spin is clamped here (counted in `clamped`)
 
 
 class Debris:
     """Rigid debris bodies made of bones of a solver's global bone arrays."""
 
     def __init__(self, mass, inertia, com0, pivot0, tip0, radius, ground: bool,
-                 g: np.ndarray | None = None):
+                 g: np.ndarray):
         self.mass, self.inertia = mass, inertia
         self.com0, self.pivot0, self.tip0, self.radius = com0, pivot0, tip0, radius
         self.ground = ground
-        self.g = np.array([0.0, 0.0, -9.81]) if g is None else g  # m/s^2
+        self.g = g  # m/s^2, the scene's gravity
         self.bones = np.zeros(0, dtype=np.int64)  # bones in debris, in body order
         self.owner = np.zeros(0, dtype=np.int64)  # debris body of each of those bones
         self.rot0 = np.zeros((0, 3, 3))  # bone rotation (rel. rest) at the break
@@ -71,12 +69,7 @@ class Debris:
                                                  - d[:, :, None] * d[:, None, :])).sum(0)
         spin = np.einsum("bij,bj->bi", inertia_w, pose["omega"][bones])
         momentum = (cross(d, m[:, None] * (v_b - v)) + spin).sum(0)
-        # A thin stick's inertia about its own axis is tiny; explicit steps
-        # would spin it up without bound from contact friction, so principal
-        # moments are floored at MIN_INERTIA_RATIO of the largest.
-        lam, vec = np.linalg.eigh(i_body)
-        lam = np.maximum(lam, MIN_INERTIA_RATIO * lam[-1])
-        i_body = (vec * lam) @ vec.T
+        i_body = floored_inertia(i_body)
         w = np.linalg.solve(i_body, momentum)
         k = self.count
         self.bones = np.concatenate([self.bones, bones])
@@ -191,7 +184,7 @@ class Debris:
             slow = touching & (np.linalg.norm(self.v, axis=1) < SLEEP_SPEED) & \
                 (np.linalg.norm(self.w, axis=1) < SLEEP_SPEED)
             self.rest_time = np.where(slow, self.rest_time + h, 0.0)
-            newly = slow & (self.rest_time > SLEEP_TIME)
+            newly = slow & (self.rest_time > SETTLE_TIME)
             self.v[newly] = 0.0
             self.w[newly] = 0.0
             self.ang[newly] = 0.0

@@ -1,27 +1,20 @@
 """The planar LOD's linear tier: whole trees stepped implicitly in joint
-space (joint_space.py) while they stay in the linear range.
+space (joint_space.py) while they stay in the linear range (range.py).
 
 Stepping: Newmark's average-acceleration rule (the trapezoidal rule:
 unconditionally stable, no numerical damping, period error (omega h)^2/12)
-at the quality's `linear_rate`; the loads are evaluated once per step at the
-predicted state, their and gravity's dependence on the pose explicitly, with
-gravity's tangent stiffness in the implicit matrix. While a blast pushes the
-tier's bones (its pulse and the capped push after it, SceneLoads), steps are
-split (BLAST_SPLIT): the pulse lasts milliseconds. After every step its
-local error is estimated at every bone's tip; past ERROR_TOLERANCE of the
-tree's height, the steps are split from then on (the willow's twigs in
-gusts, whose explicit wind moments ring at 1/30 s). Once a bone of the
-trees' mean pose (MEAN_TIME) has turned the quality's `relinearise` from
-the pose the system was linearised at, it is linearised again at the mean
-pose (JointSpace.linearise_at).
-
-A tree leaves this tier for the pymunk tier (chains/, with its pose and
-spin, `HandOff`) the step it leaves the linear range: a hinge past half its
-cone or a bone turned more than MAX_TURN from its grown pose, a joint's
-bending moment past BREAK_MARGIN of its strength (it may break), a branch
-tip reaching the ground, or its felling cut. Poses at frames come from the
-hinge angles through the exact kinematics (two hinges per joint, composed
-down the tree).
+at the quality's `linear_rate`, finer for a stiff tree (STEP_TURN); the
+loads are evaluated once per step at the predicted state, with gravity's
+tangent stiffness in the implicit matrix. While a blast pushes the tier's
+bones, steps are split in BLAST_SPLIT parts (the pulse lasts
+milliseconds). After every step its local error is estimated at every
+bone's tip; past ERROR_TOLERANCE of the tree's height the steps are split
+in two from then on. Once a bone of the trees' mean pose (over MEAN_TIME)
+has turned the quality's `relinearise` from the pose the system was
+linearised at, it is linearised again there. A tree leaves the tier the
+step it leaves the linear range (range.leaving), with its pose, spin and
+hinge state (handoff.HandOff). docs/physics.md, "The linear tier", has the
+derivations and the measurements behind each constant.
 """
 
 from __future__ import annotations
@@ -33,90 +26,26 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
-from ..rotations import matrices_from_quaternions, qmul_rows, qrotate_rows
+from ..quality import Quality
+from ..rotations import matrices_from_quaternions
 from ..scene import Scene
 from .audit import Ledger, LoadWork, per_tree
-from .common import Bones, SimTree, TreeMotion, cap_loads, locate
+from .common import Bones, SimTree, TreeMotion, external_loads, locate
+from .handoff import Engine, HandOff, Reason, TierReport
+from .hinges import pose_frames
 from .joint_space import JointSpace
 from .layout import ChainLayout
 from .loads import SceneLoads, meets
-from .quality import Quality
-from .treefactor import depths
+from .range import BREAK_MARGIN, CONE_FRACTION, CONTACT_MARGIN, MAX_TURN
+from .rules import BLAST_RING
 
 BETA, GAMMA = 0.25, 0.5  # Newmark's average acceleration
-MAX_TURN = 1.0  # rad: a bone turned further from its grown pose leaves the linear range
-CONE_FRACTION = 0.9  # a hinge past this fraction of its cone leaves it (the cone would act)
-BREAK_MARGIN = 0.8  # a joint whose moment passes this fraction of its strength leaves it
-CONTACT_MARGIN = 0.05  # m: a tip this close to the ground (and below its rest height) leaves it
-# parts per step while a blast pushes (1.3 ms at 24 Hz): under the capped
-# push a sapling's trunk base went from below 80 % of its strength to 1.27 of
-# it within one part of 5.2 ms (8 parts; 50 kg at 3 m), and was handed over
-# already breaking; in parts of 1.3 ms it is handed over 2-3 ms before
-BLAST_SPLIT = 32
-BLAST_RING = 0.05  # s: a blast's twigs ring on this long after its push (50 Hz: 2.5 periods)
-# A blast's twigs ring on after its push at tens of Hz, which a
-# stiffness-implicit step damps by about pi f h: the nonlinear engines
-# (reference.py, articulated.py) split their step to at most BLAST_STEP from
-# a blast's arrival at a tree until BLAST_RING s after its push
-# (loads.blast_windows). The `explosion` preset's oak broke 2, 6, 7 and 7
-# joints on the reference with its blast windows at 1/2000, 1/16000, 1/32000
-# and 1/64000 s (docs/physics.md, "The step while a blast rings, converged")
-BLAST_STEP = 1 / 32000  # s
-# The trapezoidal rule's local error (Zienkiewicz & Xie: h^2/12 times the
-# change of acceleration over the step), carried to every bone's tip, per
-# step, as a fraction of its tree's height. Past ERROR_TOLERANCE the tier's
-# steps are split in two for the rest of the shot (again on a later
-# excursion, once the estimate has been back below REARM of it; up to
-# MAX_PARTS). At 1/30 s in gusts, oak, spruce, palm, bamboo and sapling stay
-# below 0.022 % all shot, and so does the willow until its hanging twigs
-# start to ring (from about 3 s; the wind's moment on the turning twigs is
-# explicit here, at omega h near 2 on their 4-10 Hz joints): then 0.06, 0.5,
-# 1.5, 3.3 % per 0.5 s. At 1/60 s it stays below 0.003 %.
-ERROR_TOLERANCE = 5e-4
-MAX_PARTS = 8
-REARM = 0.25  # (a split step's local error falls as its square)
-# The pose the system is linearised at follows the tree's mean pose, its
-# hinge angles averaged over about MEAN_TIME (an exponential average, one
-# sapling's sway period): linearised at the pose of the moment instead, a
-# sapling in a gale was taken at the end of one swing and swung about rest
-# for the rest of the shot, 8 % further from the truth than without
-# relinearising; about the mean, 0.4 % nearer
-MEAN_TIME = 0.5  # s
+BLAST_SPLIT = 32  # parts per step while a blast pushes (1.3 ms at 24 Hz)
+ERROR_TOLERANCE = 5e-4  # a step's local error at a tip, as a fraction of its tree's height
+MAX_PARTS = 8  # the most parts the error estimate splits a step into
+REARM = 0.25  # it splits again once the estimate has been below this much of the tolerance
+MEAN_TIME = 0.5  # s: the mean pose (for relinearising) averages the angles over this long
 STEP_TURN = 0.3  # rad: the most a tree's first mode turns in one step
-# A tree a nonlinear engine took for large motion or a moment near breaking
-# comes back (lod.py) once it has stayed for RETURN_WINDOW within
-# RETURN_FRACTION of every limit above (hysteresis: it does not bounce
-# between engines), intact, with no hinge turning more than RETURN_TURN per
-# step of this tier (a blast's twig ringing at tens of Hz, which this step
-# would not resolve, has died down first): `in_return_range`.
-RETURN_FRACTION = 0.5
-RETURN_WINDOW = 0.5  # s
-RETURN_TURN = 0.02  # rad per step
-RETURN_DETAIL = "to linear: back in the linear range"
-RETURNABLE = ("turn", "cone", "break")  # HandOff kinds whose trees may come back
-
-
-@dataclass
-class HandOff:
-    """A tree leaving the linear tier at `substep` (in units of the pymunk
-    tier's substeps, counted from t = 0) = `time` s, in `rot` (B, 3, 3)
-    relative to rest and spinning at `omega` (B, 3) rad/s (its own bones),
-    with hinge angles `q` and rates `v` (2B,), and why."""
-
-    tree: int  # index in the trees the tier was given
-    substep: int
-    time: float
-    rot: np.ndarray
-    omega: np.ndarray
-    q: np.ndarray
-    v: np.ndarray
-    reason: str
-    kind: str  # "turn", "cone" (large motion), "break", "ground", "cut" (events)
-    step_length: float = 0.0  # s, the linear tier's step (a tree coming back gets the same)
-    work: float = 0.0  # J, the work done on the tree in this tier until then
-    # the tree as the blast under way found it (None: no blast under way), for
-    # an engine that cannot take a blast's impulse half delivered (lod.py)
-    before_blast: HandOff | None = None
 
 
 @dataclass
@@ -175,6 +104,7 @@ class LinearTier:
         self.armed = True  # the error estimate may split the steps
         self._build(*(state if state is not None else (np.zeros(0), np.zeros(0))))
         self._record(start_frame)
+        self.first_frame = self.frame = start_frame
 
     # ------------------------------------------------------------------
     # the system of the member trees
@@ -228,12 +158,8 @@ class LinearTier:
         dt = self.h if dt is None else dt
         # blasts: the impulse within this step, which ends at t
         com = pose.com.T
-        force = self.loads.forces(t, com, pose.vcom.T, pose.axis.T, b.props,
-                                  include_gravity=False, dt=dt, blast_start=t - dt)
-        pulls = b.pull_forces(t)
-        if pulls is not None:
-            force += pulls
-        force = cap_loads(force, b.mass, t, self.stats, self.locate, self.loads.blast_capped)
+        force = external_loads(self.loads, b, t, com, pose.vcom.T, pose.axis.T, self.stats,
+                               self.locate, dt=dt, blast_start=t - dt)
         if record:
             self.ledger.add_work(self._per_tree(self.load_work.update(force, com)))
         force += b.mass[:, None] * self.loads.g
@@ -241,6 +167,27 @@ class LinearTier:
 
     # ------------------------------------------------------------------
     # running
+
+    def advance_to(self, frame: int) -> list[HandOff]:
+        """Step to `frame`, recording every frame: the trees that left the
+        tier meanwhile (handoff.Tier)."""
+        out: list[HandOff] = []
+        while self.frame < frame:
+            self.frame += 1
+            out += self.advance_frame(self.frame)
+        return out
+
+    def report(self) -> TierReport:
+        """Counts (deterministic), notes and timings (s) of the run."""
+        st = self.stats
+        stats = {"steps": st.steps, "dofs": st.dofs, "rebuilds": st.rebuilds,
+                 "relinearised": st.relinearised, "limited": st.limited, "split": st.split,
+                 "max_parts": st.parts, "first_limit": st.first_limit, "refined": st.refined,
+                 "step": self.h, "segments": sum(t.rig.model.n_segments for t in self.trees)}
+        timing = {"step_seconds": st.step_seconds, "update_seconds": st.update_seconds,
+                  "build_seconds": st.build_seconds, "frame_seconds": st.frame_seconds,
+                  "segment_steps": stats["segments"] * st.steps}
+        return TierReport(Engine.LINEAR, stats, [], timing)
 
     def advance_frame(self, f: int) -> list[HandOff]:
         """Step to frame f, record it; the trees that left the tier meanwhile."""
@@ -371,9 +318,9 @@ class LinearTier:
         for k, i in enumerate(self.members):
             lo, hi = self.bones.offsets[k], self.bones.offsets[k + 1]
             self.before_blast[i] = HandOff(
-                i, substep, self.t, rot[lo:hi].copy(), kin[6:9, lo:hi].T.copy(),
-                self.q[2 * lo:2 * hi].copy(), self.v[2 * lo:2 * hi].copy(),
-                "as the blast reached it", "blast", self.h, float(self.ledger.running[i]))
+                i, self.t, substep, self.q[2 * lo:2 * hi].copy(), self.v[2 * lo:2 * hi].copy(),
+                Reason.BLAST, "as the blast reached it", rot[lo:hi].copy(),
+                kin[6:9, lo:hi].T.copy(), work=float(self.ledger.running[i]), step_length=self.h)
 
     def state(self):
         """Kinematics and pose of the current state (once per step)."""
@@ -390,13 +337,13 @@ class LinearTier:
         # in order of precedence: an event (near breaking, at the ground)
         # decides the engine before large motion does
         checks = (
-            (model.bending_moment(q) > BREAK_MARGIN * b.strength, "break",
+            (model.bending_moment(q) > BREAK_MARGIN * b.strength, Reason.NEAR_BREAK,
              f"a joint past {BREAK_MARGIN:.0%} of its strength"),
             (self.scene.ground & (tip_z < b.radius + CONTACT_MARGIN)
-             & (tip_z < self.tip_rest - 1e-3), "ground", "a tip reached the ground"),
-            ((kin[0:3] * kin[0:3]).sum(0) > MAX_TURN**2, "turn",
+             & (tip_z < self.tip_rest - 1e-3), Reason.GROUND, "a tip reached the ground"),
+            ((kin[0:3] * kin[0:3]).sum(0) > MAX_TURN**2, Reason.TURN,
              f"a bone turned past {MAX_TURN} rad"),
-            ((np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1), "cone",
+            ((np.abs(q) > CONE_FRACTION * self.cone).reshape(-1, 2).any(1), Reason.CONE,
              f"a hinge past {CONE_FRACTION:.0%} of its cone"))
         bad = checks[0][0] | checks[1][0] | checks[2][0] | checks[3][0]
         leaving = {}
@@ -406,7 +353,7 @@ class LinearTier:
             for ti_local in np.nonzero(hit_tree | cut)[0]:
                 tree = self.trees[self.members[ti_local]]
                 if not hit_tree[ti_local]:
-                    leaving[ti_local] = ("its felling cut", "cut")
+                    leaving[ti_local] = ("its felling cut", Reason.CUT)
                     continue
                 lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
                 mask, kind, why = next(c for c in checks if c[0][lo:hi].any())
@@ -426,10 +373,11 @@ class LinearTier:
             self.last_frame[i] = self.step // self.spf if self.part else \
                 math.ceil(self.step / self.spf) - 1
             substep = int((self.step + self.part / self.parts) * self.ratio + 1e-9)
-            out.append(HandOff(i, substep, self.t, rot_exact[0, lo:hi].copy(),
-                               kin[6:9, lo:hi].T.copy(), q[2 * lo:2 * hi].copy(),
-                               self.v[2 * lo:2 * hi].copy(), reason, why_kind, self.h,
-                               float(self.ledger.running[i]), self.before_blast.get(i)))
+            out.append(HandOff(i, self.t, substep, q[2 * lo:2 * hi].copy(),
+                               self.v[2 * lo:2 * hi].copy(), why_kind, reason,
+                               rot_exact[0, lo:hi].copy(), kin[6:9, lo:hi].T.copy(),
+                               work=float(self.ledger.running[i]), step_length=self.h,
+                               before_blast=self.before_blast.get(i)))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
             if keep else np.zeros(0, dtype=np.int64)
@@ -478,87 +426,3 @@ class LinearTier:
             p[last:] = 0.0
             out.append(TreeMotion(q, p, [], self.ledger.energy[:, i], self.ledger.work[:, i]))
         return out
-
-
-def pose_frames(bones: Bones, qs: np.ndarray):
-    """World rotations relative to rest as unit quaternions (F, B, 4), x y z
-    w with w >= 0, and pivots (F, B, 3) of every bone from hinge angles
-    (F, 2B): each joint turns its bone by its first hinge, then its second
-    (about the axes as they sit in the parent's frame), composed down the
-    tree, as MuJoCo composes two hinges. Computed as rows (structure of
-    arrays), one depth of the tree at a time."""
-    frames = qs.shape[0]
-    nb = bones.n
-    axes = bones.hinges
-    half = 0.5 * qs.reshape(frames, nb, 2)
-    rot = np.empty((4, frames, nb))
-    piv = np.empty((3, frames, nb))
-    parent = bones.parent
-    depth = depths(parent)
-    for d in range(int(depth.max()) + 1 if nb else 0):
-        b = np.nonzero(depth == d)[0]
-        own = None
-        for k in range(2):
-            s, c = np.sin(half[:, b, k]), np.cos(half[:, b, k])
-            hinge = np.concatenate([s[None] * axes[b, k].T[:, None, :], c[None]])
-            own = hinge if own is None else qmul_rows(own, hinge)
-        if d == 0:
-            rot[:, :, b] = own
-            piv[:, :, b] = bones.pivot0[b].T[:, None, :]
-        else:
-            p = parent[b]
-            fr = rot[:, :, p]
-            rot[:, :, b] = qmul_rows(fr, own)
-            arm = np.broadcast_to((bones.pivot0[b] - bones.pivot0[p]).T[:, None, :],
-                                  (3, frames, len(b)))
-            piv[:, :, b] = piv[:, :, p] + qrotate_rows(fr, arm)
-    rot *= np.where(rot[3] < 0, -1.0, 1.0)
-    return rot.transpose(1, 2, 0), piv.transpose(1, 2, 0)
-
-
-def hinges_from_pose(bones: Bones, rot: np.ndarray, omega: np.ndarray):
-    """The hinge angles q and rates v (2B,), rad and rad/s, of bones whose
-    rotations relative to rest are `rot` (B, 3, 3) and world angular
-    velocities `omega` (B, 3) rad/s: the inverse of pose_frames. Each joint's
-    turn relative to its parent, L = R_parent^T R = Rot(n0, q0) Rot(n1, q1),
-    takes the bone's axis a (n0, n1, a orthonormal, n1 = a x n0) to
-    sin q1 n0 - cos q1 sin q0 n1 + cos q1 cos q0 a; its relative spin in the
-    parent's rest frame is q0' n0 + q1' Rot(n0, q0) n1. A twist about the
-    bone (which these hinges cannot hold) is dropped."""
-    nb = bones.n
-    has = bones.parent >= 0
-    p = np.maximum(bones.parent, 0)
-    frame = np.where(has[:, None, None], rot[p], np.eye(3))
-    w_parent = np.where(has[:, None], omega[p], 0.0)
-    local = np.einsum("bji,bjk->bik", frame, rot)  # R_parent^T R
-    n0, n1 = bones.hinges[:, 0], bones.hinges[:, 1]
-    axis = np.cross(n0, n1)  # a = n0 x n1 for n1 = a x n0
-    turned = np.einsum("bij,bj->bi", local, axis)
-    q1 = np.arcsin(np.clip((turned * n0).sum(1), -1.0, 1.0))
-    q0 = np.arctan2(-(turned * n1).sum(1), (turned * axis).sum(1))
-    w = np.einsum("bji,bj->bi", frame, omega - w_parent)  # relative spin, parent's rest frame
-    c, s = np.cos(q0)[:, None], np.sin(q0)[:, None]
-    n1_turned = c * n1 + s * np.cross(n0, n1)  # Rot(n0, q0) n1 (n0 . n1 = 0)
-    q = np.stack([q0, q1], 1).reshape(2 * nb)
-    v = np.stack([(w * n0).sum(1), (w * n1_turned).sum(1)], 1).reshape(2 * nb)
-    return q, v
-
-
-def in_return_range(bones: Bones, rot: np.ndarray, pivot: np.ndarray, q: np.ndarray,
-                    v: np.ndarray, moment: np.ndarray, h: float) -> bool:
-    """Whether intact bones, turned by `rot` (B, 3, 3) from rest with
-    pivots `pivot` (B, 3) m, hinge angles and rates q, v (2B,) rad, rad/s
-    and joint moments `moment` (B,) N m, are back in this tier's range with
-    RETURN_FRACTION's margin: bones turned less than MAX_TURN, hinges within
-    CONE_FRACTION of their cones, moments below BREAK_MARGIN of their
-    strengths, tips clear of the ground (or no lower than they grew), no
-    hinge turning more than RETURN_TURN in a step of `h` s."""
-    cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
-    tip_z = pivot[:, 2] + np.einsum("bj,bj->b", rot[:, 2], bones.tip0 - bones.pivot0)
-    return bool(np.all(np.arccos(cos) < RETURN_FRACTION * MAX_TURN)
-                and np.all(np.abs(q).reshape(-1, 2)
-                           < RETURN_FRACTION * CONE_FRACTION * bones.cone[:, None])
-                and np.all(moment < RETURN_FRACTION * BREAK_MARGIN * bones.strength)
-                and np.all((tip_z > bones.radius + 2 * CONTACT_MARGIN)
-                           | (tip_z >= bones.tip0[:, 2] - 1e-3))
-                and np.all(np.abs(v) * h < RETURN_TURN))

@@ -73,9 +73,33 @@ class SceneLoads:
         self.attractors = [Attractor(np.array(a.position), a.strength, a.radius, a.time, a.end)
                            for a in scene.attractors]
 
-    @property
-    def has_flow(self) -> bool:
-        return self.wind is not None or bool(self.vortices)
+    def dominant_direction(self, base: np.ndarray, cut=None, pulls=()) -> np.ndarray | None:
+        """The unit horizontal direction the pymunk tier lays a tree's
+        bending planes along, for a tree standing at `base` (m): the first
+        of its felling cut's, a pull's, the wind's, a blast's (away from
+        it), a vortex's swirl, an attractor's, a projectile's flight; None
+        if none has one."""
+        if cut is not None:
+            a = math.radians(cut.direction)
+            return np.array([math.cos(a), math.sin(a), 0.0])
+        for p in pulls:
+            if (d := _horizontal(p.force)) is not None:
+                return d
+        if self.wind is not None:
+            return self.wind.direction.copy()
+        for e in self.explosions:
+            if (d := _horizontal(base - e.position)) is not None:
+                return d
+        for v in self.vortices:
+            if (d := _horizontal(base[:2] - v.centre(v.time))) is not None:
+                return np.array([-d[1], d[0], 0.0])  # the swirl is tangential
+        for a in self.attractors:
+            if (d := _horizontal(a.position - base)) is not None:
+                return d
+        for p in self.scene.projectiles:
+            if (d := _horizontal(p.velocity)) is not None:
+                return d
+        return None
 
     def air_velocity(self, points: np.ndarray, t: float) -> np.ndarray:
         air = np.zeros_like(points)
@@ -191,6 +215,13 @@ class SceneLoads:
             if a.strength != 0:
                 quiet = max(quiet, min(a.end, self.scene.duration))
         return quiet
+
+
+def _horizontal(v) -> np.ndarray | None:
+    """The unit horizontal part of a vector, None if it has none."""
+    v = np.array([v[0], v[1], 0.0], dtype=float)
+    n = np.linalg.norm(v)
+    return v / n if n > 1e-9 else None
 
 
 def meets(windows, t: float, dt: float, after: float = 0.0) -> bool:

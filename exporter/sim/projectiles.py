@@ -107,7 +107,7 @@ class Projectiles:
                 s, v = hit
                 b = a + (b - a) * s + v * dt * (1 - s)
             self.pos[i], self.vel[i] = b, v
-            self._ground(i, dt)
+            self._ground(i, dt, -float(g[2]))
             w = self.spin[i]
             if np.any(w):
                 x, y, z, qw = self.quat[i]
@@ -193,7 +193,9 @@ class Projectiles:
         """Kinetic energy (J) of projectile i at velocity v (m/s) and its spin."""
         return 0.5 * self.mass[i] * (v @ v) + 0.5 * self.inertia[i] * (self.spin[i] @ self.spin[i])
 
-    def _ground(self, i: int, dt: float) -> None:
+    def _ground(self, i: int, dt: float, gravity: float) -> None:
+        """Projectile i on the ground (z = 0) over `dt` s: a bounce with its
+        restitution and friction, and sliding friction under `gravity` m/s^2."""
         r = self.radius[i]
         if self.pos[i, 2] >= r:
             return
@@ -211,7 +213,7 @@ class Projectiles:
             vh = self.vel[i, :2]
             speed = np.linalg.norm(vh)
             if speed > 0:
-                dv = min(speed, self.mu[i] * 9.81 * dt)
+                dv = min(speed, self.mu[i] * gravity * dt)
                 self.vel[i, :2] = vh - vh / speed * dv
             self.spin[i] *= 0.8
 

@@ -8,14 +8,20 @@ import math
 import numpy as np
 
 from ..audit import bone_energy
-from ..debris import SLEEP_TIME
-from ..events import AT_REST, BROKE, CUT, HINGE, UPROOTED, Event
+from ..events import AT_REST, CUT, HINGE, Event
+from ..rules import (
+    FELL_NUDGE,
+    SETTLE_SPEED,
+    SETTLE_TIME,
+    STILL_SPEED,
+    Felling,
+    break_event,
+    past_strength,
+    still_for,
+)
 from .build import LIMIT, PIVOT, SPRING
 
-FELL_NUDGE = -0.05  # rad/s: the push at the cut, toward the felling direction
 LIGHT_PIECE = 0.01  # of its tree's mass: a stem's top lighter than this breaks off as debris
-SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this for SLEEP_TIME sleeps
-STILL_SPEED = 0.005  # m/s and rad/s: the same for a standing tree no load reaches any more
 
 
 class ChainEvents:
@@ -35,11 +41,11 @@ class ChainEvents:
                 moment[i] += math.copysign(limit.impulse / self.h, moment[i])
         bones = self.body_bone[cand]
         total = np.sqrt(np.bincount(bones, moment * moment, minlength=self.n))
-        over = np.nonzero((total > self.strength) & self.joint_alive & ~self.in_debris)[0]
+        over = np.nonzero(past_strength(total, self.strength) & self.joint_alive
+                          & ~self.in_debris)[0]
         for b in over:
             if self.joint_alive[b] and not self.in_debris[b]:
-                self.break_joint(int(b), t, pose, f"{total[b]:.0f} N m > strength "
-                                                  f"{self.strength[b]:.0f} N m")
+                self.break_joint(int(b), t, pose, float(total[b]))
 
     def _spring_moments(self, bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The spring moments (N m) at these bodies' joints, each in its
@@ -64,7 +70,7 @@ class ChainEvents:
                 self.space.remove(c)
                 self.joints[body][w] = None
 
-    def break_joint(self, bone: int, t: float, pose: dict, why: str) -> None:
+    def break_joint(self, bone: int, t: float, pose: dict, moment: float) -> None:
         """Remove the joint at a bone's base. In a root chain the part above
         falls on as a free planar chain; elsewhere, and when a stem's top
         lighter than LIGHT_PIECE of its tree breaks off, the broken-off part
@@ -73,10 +79,8 @@ class ChainEvents:
         steps for its spin, 1.4x the CPU of the `hurricane` preset, for a
         bending that no longer shows.)"""
         self.joint_alive[bone] = False
-        tree = self.locate(bone)[0]
-        path = self.bone_path(bone)
-        kind = UPROOTED if self.parent[bone] < 0 else BROKE
-        self.events.append(Event(t, tree, kind, path, why))
+        self.events.append(break_event(t, self.locate(bone)[0], self.bone_path(bone),
+                                       self.parent[bone] < 0, moment, self.strength[bone]))
         self.stats.broken += 1
         freed = self._outboard(bone)
         if self.parent[bone] < 0:  # uprooted
@@ -166,7 +170,7 @@ class ChainEvents:
     def settle(self, t: float, pose: dict, dt: float) -> None:
         """Put trees at rest to sleep, as one sleeping rigid body each: a
         fallen tree (stem off its root) slower than SETTLE_SPEED for
-        SLEEP_TIME (lying on the ground it would keep the solver at contact
+        SETTLE_TIME (lying on the ground it would keep the solver at contact
         rate), and a standing one slower than STILL_SPEED once no load that
         changes will reach it again (after a blast, a pull, a passing gust
         front)."""
@@ -185,8 +189,8 @@ class ChainEvents:
                 self.still_time[ti] = 0.0
                 continue
             speed = max(np.abs(pose["vcom"][awake]).max(), np.abs(pose["omega"][awake]).max())
-            self.still_time[ti] = self.still_time[ti] + dt if speed < limit else 0.0
-            if self.still_time[ti] > SLEEP_TIME:
+            self.still_time[ti] = still_for(self.still_time[ti], speed, limit, dt)
+            if self.still_time[ti] > SETTLE_TIME:
                 freed = np.zeros(self.n, dtype=bool)
                 freed[awake] = True
                 self._to_debris(freed, pose, asleep=True)
@@ -236,8 +240,8 @@ class ChainEvents:
                 continue
             roots = [int(self.chain_bones[ci][0]) for ci in range(len(self.chain_bones))
                      if self.chain_tree[ci] == ti and self.chain_parent[ci] < 0]
-            state = self.cut_state.get(ti, "standing")
-            if state == "standing" and t >= cut.time:
+            state = self.cut_state.get(ti, Felling.STANDING)
+            if state is Felling.STANDING and t >= cut.time:
                 self.read()
                 before = self._kinetic(ti)
                 self._rigid_lumps(ti)
@@ -248,15 +252,15 @@ class ChainEvents:
                     self._remove_joint(i, (SPRING, LIMIT))
                     for k in range(self.planes_of_bone[b]):
                         self.breakable[self.body_of[(b, k)]] = False
-                    self._nudge(b, FELL_NUDGE)
+                    self._nudge(b, -FELL_NUDGE)  # (pymunk's angles: negative tips it over)
                 self.read()
                 self.add_tree_work(ti, self._kinetic(ti) - before)  # the feller's push
                 for b in roots:
                     self._free_rigid_motion(b, planes=(0,))
-                self.cut_state[ti] = "hinged"
+                self.cut_state[ti] = Felling.HINGED
                 self.events.append(Event(t, tree.name, CUT, self.bone_path(roots[0]),
                                          "the hinge holds"))
-            elif state == "hinged":
+            elif state is Felling.HINGED:
                 lean = max(abs(self.state[self.body_of[(b, 0)], 2]) for b in roots)
                 if lean > math.radians(cut.hinge):
                     for b in roots:
@@ -264,6 +268,6 @@ class ChainEvents:
                         for k in range(self.planes_of_bone[b]):
                             self._remove_joint(self.body_of[(b, k)])
                         self._fall_plane(self.chain_bones[self.bone_chain[b]])
-                    self.cut_state[ti] = "falling"
+                    self.cut_state[ti] = Felling.FALLING
                     self.events.append(Event(t, tree.name, HINGE, self.bone_path(roots[0]),
                                              f"lean {math.degrees(lean):.0f} deg"))

@@ -10,8 +10,9 @@ import numpy as np
 
 from ...rotations import apply, apply_transposed, cross, rotvec_rate
 from ..audit import per_tree
-from ..common import cap_loads
+from ..common import cap_loads, external_loads
 from ..contact import effective_mass, ground_forces, stored_energy
+from ..rules import exact_decay
 
 REFINE = 16  # pymunk steps per substep at least, while an impulsive load acts (8 let a
 # hit open a twig's joint 1.1 %)
@@ -33,12 +34,9 @@ class ChainForces:
         n = self.n
         rot, com, cog = pose["rot"], pose["com"], pose["cog"]
         axis = self._axes(pose)
-        force = self.loads.forces(t, com, pose["vcom"], axis, self.props, dt=dt)
-        pulls = self.bones.pull_forces(t)
-        if pulls is not None:
-            force += pulls
         limited = self.stats.limited
-        force = cap_loads(force, self.mass, t, self.stats, self.locate, self.loads.blast_capped)
+        force = external_loads(self.loads, self.bones, t, com, pose["vcom"], axis, self.stats,
+                               self.locate, dt=dt, gravity=True)
         external = force - self.mass[:, None] * self.loads.g
         external[self.in_debris] = 0.0  # debris counts its own (Debris.work)
         self.ledger.add_work(per_tree(self.load_work.update(external, com), self.bone_tree,
@@ -62,6 +60,10 @@ class ChainForces:
             cap = GAP_REFINE
         self.refine = int(min(cap, want))
         self.stats.max_refine = max(self.stats.max_refine, self.refine)
+        if self.refine > 1:  # why, for the bake's note
+            cause = ("a blast" if self.loads.blast_active else "a capped load"
+                     if self.stats.limited > limited else "a hit" if impulsive else "a fast spin")
+            self.stats.refined_by[cause] = self.stats.refined_by.get(cause, 0) + 1
         if self.debris.count:
             self.debris.step(dt, lambda c, v, ax, start, h: self._debris_loads(t + start, c, v,
                                                                                 ax, h))
@@ -122,7 +124,7 @@ class ChainForces:
         # structural damping on the motion relative to the frame (pymunk's
         # velocities): C = alpha M, as an exact decay over the interval, so
         # that stiff, fast limbs can never overshoot
-        decay = -np.expm1(-self.body_alpha * dt) / dt
+        decay = exact_decay(self.body_alpha, dt)
         rel = self._bending_velocity(decay)
         fx = (f_loc * self.body_e).sum(1) - decay * self.body_mass * rel[:, 0]
         fy = (f_loc * self.body_d).sum(1) - decay * self.body_mass * rel[:, 1]

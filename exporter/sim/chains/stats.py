@@ -25,6 +25,7 @@ class Stats:
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
     refined: int = 0  # substeps split into finer steps (blasts, hits, caps, fast spins)
     max_refine: int = 1  # the most steps a substep was split into
+    refined_by: dict = field(default_factory=dict)  # load updates that split, by cause
     broken: int = 0
     debris: int = 0
     debris_clamped: int = 0  # debris body substeps whose spin was clamped (debris.MAX_SPIN)

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import fields
 
 import numpy as np
 import pymunk
@@ -55,13 +56,23 @@ from ...errors import SimulationError
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
 from ..audit import Ledger, LoadWork, bone_energy, per_tree
-from ..common import SimTree, TreeMotion, locate, sub_frame_samples
+from ..common import (
+    ProjectileTracks,
+    SimTree,
+    TreeMotion,
+    locate,
+    sub_frame_samples,
+    tree_motion,
+)
 from ..debris import Debris
 from ..events import TIER, Event
-from ..linear import BLAST_RING, RETURN_DETAIL, RETURN_WINDOW, hinges_from_pose, in_return_range
+from ..handoff import Engine, HandOff, Reason, TierReport
+from ..hinges import hinges_from_pose
+from ..range import RETURN_DETAIL, ReturnWatch, in_return_range
+from ..rules import BLAST_RING
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
-from ..quality import Quality
+from ...quality import Quality
 from .breaking import ChainEvents
 from .build import SPRING, ChainBuild
 from .forces import ChainForces
@@ -92,7 +103,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         # rates (2B,) where they did: from then on the tier records nothing
         self.hand_back: float | None = None
         self.handed_back: tuple | None = None
-        self.returning = 0.0  # s the trees have been back in range
+        self.watch = ReturnWatch(scene.fps)  # back in the linear range?
         self._collect()
         self._chains()
         self._lumping()
@@ -107,15 +118,41 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         ti = int(self.bone_tree[bone])
         return self.trees[ti].rig.model.segment_paths()[self.locate(bone)[1]]
 
-    def run(self, progress=None) -> list[TreeMotion]:
-        """Simulate the scene from rest; per tree, the bones' motion at every frame."""
-        self.begin()
-        frames = self.scene.frame_count
-        for f in range(1, frames):
-            self.advance_frame(f)
-            if progress is not None:
-                progress(f, frames - 1)
-        return self.motions()
+    def advance_to(self, frame: int) -> list[HandOff]:
+        """Step to `frame`, recording every frame: its trees, handed back to
+        the linear tier, the frame they went back (handoff.Tier)."""
+        out = []
+        while self.frame < frame:
+            self.frame += 1
+            back = self.handed_back is None
+            self.advance_frame(self.frame)
+            if back and self.handed_back is not None:
+                f, q, v = self.handed_back
+                work = self.ledger.work[f]
+                out += [HandOff(k, f / self.scene.fps, self.substep, q[2 * lo:2 * hi],
+                                v[2 * lo:2 * hi], Reason.BACK, RETURN_DETAIL, frame=f,
+                                work=float(work[k]))
+                        for k, (lo, hi) in enumerate(zip(self.offsets[:-1], self.offsets[1:]))]
+        return out
+
+    def report(self) -> TierReport:
+        """Counts (deterministic), notes and timings (s) of the run."""
+        st = self.stats
+        stats = {f.name: getattr(st, f.name) for f in fields(st)
+                 if f.name not in ("notes", "step_seconds", "update_seconds", "frame_seconds")}
+        stats["segments"] = sum(t.rig.model.n_segments for t in self.trees)
+        stats["substep"], stats["force_interval"] = self.h, self.dt_update
+        stats["stability"] = self.quality.stability
+        timing = {"step_seconds": st.step_seconds, "update_seconds": st.update_seconds,
+                  "frame_seconds": st.frame_seconds,
+                  "segment_steps": stats["segments"] * st.substeps}
+        return TierReport(Engine.PYMUNK, stats, list(st.notes), timing)
+
+    def tracks(self) -> ProjectileTracks | None:
+        """The projectiles' flight, after the run; None without projectiles."""
+        p = self.projectiles
+        return None if p is None else ProjectileTracks(p.shape, p.size, p.track_pos,
+                                                       p.track_quat)
 
     def begin(self, substep: int = 0, start: StartState | None = None) -> None:
         """Set up a run from substep `substep` (time substep x h), from rest
@@ -161,8 +198,14 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.contact_dt = self.h  # s, the hold the ground's springs were last set for
         self.refine = 1
         first = substep // self.spf
-        self.first_frame = first
+        self.start_frame = first  # the frame it starts in (or at)
         self.substep_start = substep
+        # the first frame whose pose is its own (one started between frames
+        # records the hand-over's pose in the frame before)
+        self.first_frame = first + (1 if substep % self.spf else 0)
+        # the last frame advanced to: from rest frame 0; from a hand-over the
+        # frame before the one it reaches first (at a frame: that frame again)
+        self.frame = 0 if start is None else math.ceil(substep / self.spf - 1e-9) - 1
         self.quats[first] = quaternions_from_matrices(self.pose["rot"])
         self.pivots[first] = self.pose["pivot"]
         self._audit(first, self.pose)
@@ -191,7 +234,6 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                     before = len(self.events)
                     self.check_breaks(t, self.pose)
                     if len(self.events) > before:
-                        self.log(f"t = {t:.3f} s: {len(self.events) - before} joints broke")
                         self.pose = self.reconstruct()
                 # contact needs a stiff spring, and only an update every
                 # substep affords one: while anything touches the ground,
@@ -233,7 +275,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
             self.prev, self.pose, self.fresh = self.pose, pose_frame, True
         self.quats[f] = quaternions_from_matrices(pose_frame["rot"])
         self.pivots[f] = pose_frame["pivot"]
-        if f > self.first_frame:  # fast turns get the updates between frames as samples
+        if f > self.start_frame:  # fast turns get the updates between frames as samples
             sub_frame_samples(self.quats[f - 1], self.quats[f], self.samples, self.offsets,
                               self.extra)
         self.samples = []
@@ -250,23 +292,19 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.stats.debris_clamped = self.debris.clamped
 
     def _back_in_range(self, t: float, pose: dict) -> bool:
-        """Whether the trees have been back in the linear tier's range, with
-        margin, for RETURN_WINDOW s up to this frame (at t s): the rule of
-        the reference's `_back_in_range` (linear.py's RETURN_* constants),
-        on this tier's pose: every joint holding, none cut, no projectile,
-        nothing on the ground, every blast past; bones, hinges, moments
-        and tips within RETURN_FRACTION of the linear tier's limits; no hinge
-        turning more than RETURN_TURN per linear step (in_return_range)."""
-        if (not self.joint_alive.all() or self.in_debris.any() or self.cut_state
-                or self.projectiles is not None or self.contact_active
-                or not self.loads.blasts_passed(t, pose["com"], self._axes(pose), self.props)):
-            self.returning = 0.0
-            return False
-        q, v = hinges_from_pose(self.bones, pose["rot"], pose["omega"])
-        ok = in_return_range(self.bones, pose["rot"], pose["pivot"], q, v, self.joint_moments(),
-                             self.hand_back)
-        self.returning = self.returning + 1.0 / self.scene.fps if ok else 0.0
-        return self.returning >= RETURN_WINDOW - 1e-9
+        """Whether the trees have been back in the linear range for
+        range.RETURN_WINDOW up to this frame (at t s): every joint holding,
+        none cut, no projectile, nothing on the ground, every blast past,
+        and the pose within range.in_return_range."""
+        intact = not (not self.joint_alive.all() or self.in_debris.any() or self.cut_state
+                      or self.projectiles is not None or self.contact_active
+                      or not self.loads.blasts_passed(t, pose["com"], self._axes(pose),
+                                                      self.props))
+        if intact:
+            q, v = hinges_from_pose(self.bones, pose["rot"], pose["omega"])
+            intact = in_return_range(self.bones, pose["rot"], pose["pivot"], q, v,
+                                     self.joint_moments(), self.hand_back)
+        return self.watch.update(intact)
 
     def _audit(self, frame: int, pose: dict) -> None:
         """Record each tree's energy (audit.py): its bones' (debris included)
@@ -323,17 +361,10 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
 
     def motions(self) -> list[TreeMotion]:
         """Per tree, the bones' motion at every frame recorded so far."""
-        out = []
-        for ti, tree in enumerate(self.trees):
-            a, b = self.offsets[ti], self.offsets[ti + 1]
-            events = [e for e in self.events if e.tree == tree.name]
-            extra = self.extra[ti]
-            out.append(TreeMotion(self.quats[:, a:b], self.pivots[:, a:b], events,
-                                  self.ledger.energy[:, ti], self.ledger.work[:, ti],
-                                  np.array([e[0] for e in extra]),
-                                  np.array([e[1] for e in extra]).reshape(-1, b - a, 4),
-                                  np.array([e[2] for e in extra]).reshape(-1, b - a, 3)))
-        return out
+        return [tree_motion(self.quats, self.pivots, slice(self.offsets[ti], self.offsets[ti + 1]),
+                            [e for e in self.events if e.tree == tree.name], self.ledger, ti,
+                            self.extra[ti])
+                for ti, tree in enumerate(self.trees)]
 
     def _hand_over(self, start: StartState) -> None:
         """Put every body where the handed-over pose has its bone: each

@@ -1,0 +1,144 @@
+"""What passes between the planar LOD's tiers: why a tree left one (`Reason`),
+the state it left in (`HandOff`), which engine takes it (`engine_for`), and
+the protocol every tier implements (`Tier`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import StrEnum
+from typing import Protocol
+
+import numpy as np
+
+from ..quality import CutEngine, NonlinearPolicy, Quality, TierPolicy
+from .common import TreeMotion
+
+
+class Engine(StrEnum):
+    """The engines of the planar LOD: the linear tier (linear.py), the pymunk
+    tier (chains/) and the MuJoCo reference (reference/)."""
+
+    LINEAR = "linear"
+    PYMUNK = "pymunk"
+    REFERENCE = "reference"
+
+
+class Reason(StrEnum):
+    """Why a tree leaves the linear tier (checked in this order, linear.py),
+    or why an engine hands it back."""
+
+    NEAR_BREAK = "break"  # a joint's moment past linear.BREAK_MARGIN of its strength
+    GROUND = "ground"  # a branch tip reached the ground
+    TURN = "turn"  # a bone turned past linear.MAX_TURN from its grown pose
+    CONE = "cone"  # a hinge past linear.CONE_FRACTION of its cone
+    CUT = "cut"  # its felling cut
+    PROJECTILE = "projectile"  # a thrown object can reach it: it starts in the nonlinear engine
+    BACK = "back"  # a nonlinear engine hands it back: in the linear range again
+    BLAST = "blast"  # (a HandOff.before_blast: the state a blast under way found it in)
+
+
+# trees taken for these may come back to the linear tier once back in its range
+RETURNABLE = frozenset({Reason.TURN, Reason.CONE, Reason.NEAR_BREAK})
+
+
+def engine_for(reason: Reason, quality: Quality) -> Engine:
+    """The one engine that takes a tree leaving the linear tier for `reason`
+    (docs/physics.md, "Which engine takes a tree"). Under the AUTO policy a
+    cut and a tip at the ground go to the pymunk tier (a cut at `final` to
+    the reference: quality.cut_engine); large motion, a joint near breaking
+    and trees a projectile can reach go to the reference."""
+    if reason is Reason.BACK:
+        return Engine.LINEAR
+    if quality.tier is TierPolicy.PYMUNK or quality.nonlinear is NonlinearPolicy.PYMUNK:
+        return Engine.PYMUNK
+    if quality.nonlinear is NonlinearPolicy.REFERENCE:
+        return Engine.REFERENCE
+    if reason is Reason.GROUND:
+        return Engine.PYMUNK
+    if reason is Reason.CUT and quality.cut_engine is CutEngine.PYMUNK:
+        return Engine.PYMUNK
+    return Engine.REFERENCE
+
+
+@dataclass(frozen=True)
+class HandOff:
+    """A tree leaving a tier at `time` s = `substep` pymunk substeps from
+    t = 0 (the pymunk tier starts there), with its state: hinge angles `q`
+    and rates `v` (2B,) rad and rad/s from the grown shape; rotations
+    relative to rest `rot` (B, 3, 3) and world spins `omega` (B, 3) rad/s
+    (None where the tier does not have them: a hand-back). `frame`: the
+    first frame the next tier owns (a hand-back), else -1. `work` J: done on
+    the tree since the bake's start. `before_blast`: the tree as the blast
+    under way found it (None: no blast under way): the next engine starts
+    there (a nonlinear engine cannot take a blast's impulse half delivered).
+    `step_length` s: the linear tier's step (a tree coming back gets it)."""
+
+    tree: int  # index among the chunk's trees
+    time: float
+    substep: int
+    q: np.ndarray
+    v: np.ndarray
+    reason: Reason
+    detail: str
+    rot: np.ndarray | None = None
+    omega: np.ndarray | None = None
+    frame: int = -1
+    work: float = 0.0
+    step_length: float = 0.0
+    before_blast: HandOff | None = None
+
+    def origin(self) -> HandOff:
+        """The state the next engine starts from: where the blast under way
+        found the tree, else here (with this hand-off's reason either way)."""
+        if self.before_blast is None:
+            return self
+        return replace(self.before_blast, reason=self.reason, detail=self.detail,
+                       step_length=self.step_length, before_blast=None)
+
+    def offset_work(self, joules: float) -> HandOff:
+        """The same hand-off with `joules` J added to its work (and its
+        before-blast state's): a tier counts work from its own start."""
+        before = None if self.before_blast is None else self.before_blast.offset_work(joules)
+        return replace(self, work=self.work + joules, before_blast=before)
+
+
+@dataclass(frozen=True)
+class TierSpan:
+    """A stretch of a tree's shot in one engine, from `start` s (None: from
+    the shot's start), and why it came there."""
+
+    engine: Engine
+    start: float | None = None
+    reason: Reason | None = None
+    detail: str = ""
+
+
+class Tier(Protocol):
+    """An engine running some trees of a chunk. It is started (by its own
+    constructor) from rest or from hand-offs; `first_frame` is the first
+    frame whose pose is its own; `advance_to(frame)` steps to that frame,
+    recording every frame, and returns the trees that left it (hand-offs:
+    to another engine, or back to the linear tier); `motions()` gives per
+    tree the frames it spent there (zero elsewhere), its events, energy and
+    work (J, from the tier's start); `report()` its counts, notes and
+    timings."""
+
+    first_frame: int
+
+    def advance_to(self, frame: int) -> list[HandOff]: ...
+
+    def motions(self) -> list[TreeMotion]: ...
+
+    def report(self) -> TierReport: ...
+
+
+@dataclass
+class TierReport:
+    """What a tier run did, for the bake's meta (deterministic `stats`,
+    counts that add up over runs), its `notes` (in words) and `timing` (s,
+    never in the bake)."""
+
+    engine: Engine
+    stats: dict
+    notes: list[str]
+    timing: dict
