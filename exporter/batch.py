@@ -4,10 +4,12 @@
 A job is a scene (or a grammar baked alone, or a grammar placed in a
 scene's forces) with overrides and export formats; docs/batch.md describes
 the job file. A finished job leaves `job.json` in its folder, written last:
-its `hash` covers the tool version, the package's own code, the job's
-settings and the content of every input file, and it records every output's
-size and sha256; a rerun skips a job only if the hash matches and every
-output still has its recorded size and sha256, and redoes the rest. Files
+its `hash` covers the tool version, the package's own code, the installed
+versions of the libraries that decide the motion (treebake.versions), the
+job's settings and the content of every input file, and it records those
+versions and every output's size and sha256; a rerun skips a job only if
+the hash matches and every output still has its recorded size and sha256,
+and redoes the rest, saying why (which version changed, if one did). Files
 appear only when complete (temporary name, then rename), so a killed batch
 leaves no half-written file and resumes cleanly. A lost worker process
 costs only its job (retried up to MAX_ATTEMPTS times); SIGINT/SIGTERM stop
@@ -21,7 +23,6 @@ runners), batch_dask (a Dask cluster), batch_summary (summary, table).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -38,22 +39,24 @@ from .batch_pool import MAX_ATTEMPTS, StopSignals, run_processes, run_serial
 from .batch_summary import format_table, summary
 from .errors import TreebakeError
 from .fileio import job_lock, write_text
-from .fingerprint import code_fingerprint  # looked up here: bench/faults.py stands in another
+from .fingerprint import ResumeFingerprint, code_fingerprint
+from .versions import NOT_INSTALLED, UNKNOWN, VersionChange, runtime_versions, version_changes
 
 __all__ = ["DASK_WORKER_TIMEOUT", "MAX_ATTEMPTS", "Job", "JobResult", "code_fingerprint",
-           "file_record", "finished", "format_table", "load_jobs", "resume_hash", "run_batch",
-           "run_job", "scene_of", "stale_reason", "summary"]
+           "file_record", "finished", "format_table", "load_jobs", "resume_fingerprint",
+           "run_batch", "run_job", "runtime_versions", "scene_of", "stale_reason", "summary"]
 
 
 # ---------------------------------------------------------------------------
 # resume checks
 
 
-def resume_hash(job: Job) -> str:
-    """The resume hash: the job's inputs_digest plus the package's code
-    fingerprint, so editing treebake itself reruns the jobs it could change."""
-    return hashlib.sha256(f"{job.inputs_digest()} code {code_fingerprint()}".encode()
-                          ).hexdigest()
+def resume_fingerprint(job: Job) -> ResumeFingerprint:
+    """The job's inputs_digest, the package's code fingerprint and this
+    install's library versions: editing treebake itself, or running on a
+    node with another MuJoCo, numpy or pymunk, reruns the job."""
+    # both looked up in this module: tests and bench/faults.py stand in others here
+    return ResumeFingerprint(job.inputs_digest(), code_fingerprint(), runtime_versions())
 
 
 def _clean_stale(folder: Path) -> None:
@@ -71,10 +74,12 @@ def file_record(folder: Path, path: Path) -> dict:
             "bytes": path.stat().st_size, "sha256": sha256(path)}
 
 
-def stale_reason(job: Job, out: Path) -> str | None:
+def stale_reason(job: Job, out: Path, fingerprint: ResumeFingerprint | None = None
+                 ) -> str | None:
     """Why the job must be (re)done, or None if its outputs are complete:
-    job.json present, made by the same code from the same inputs, and every
-    recorded file still of its recorded size and sha256."""
+    job.json present, made by the same code with the same library versions
+    from the same inputs, and every recorded file still of its recorded size
+    and sha256. `fingerprint`: resume_fingerprint(job), if already known."""
     from .export import sha256
 
     folder = out / job.name
@@ -84,8 +89,11 @@ def stale_reason(job: Job, out: Path) -> str | None:
         return "not run yet"
     except (OSError, ValueError):
         return "job.json unreadable"
-    if data.get("hash") != resume_hash(job):
-        return "inputs, settings or treebake's code changed"
+    if not isinstance(data, dict):
+        return "job.json unreadable"
+    fingerprint = fingerprint or resume_fingerprint(job)
+    if data.get("hash") != fingerprint.hash:
+        return _changed(data, fingerprint)
     files = data.get("files")
     if not isinstance(files, list) or not files or not all(isinstance(f, dict) for f in files):
         return "job.json has no output checksums (older treebake)"
@@ -102,8 +110,37 @@ def stale_reason(job: Job, out: Path) -> str | None:
     return None
 
 
+def _changed(record: dict, now: ResumeFingerprint) -> str:
+    """Why a job.json's hash is not `now.hash`: the library versions that
+    changed (and whether anything else did too), else inputs or code."""
+    recorded = record.get("versions")
+    if not isinstance(recorded, dict):
+        return "job.json records no library versions (older treebake)"
+    changes = version_changes(recorded, now.versions)
+    if not changes:
+        return "inputs, settings or treebake's code changed"
+    why = "; ".join(_version_reason(c) for c in changes)
+    if record.get("hash") != now.with_versions(recorded).hash:
+        why += "; and inputs, settings or treebake's code changed"
+    return why
+
+
+def _version_reason(change: VersionChange) -> str:
+    """'made with mujoco 3.13.0, this install has 4.0.0' and its variants
+    for a library installed on one side only, or not recorded."""
+    name, before, after = change.name, change.before, change.after
+    made = {NOT_INSTALLED: f"made without {name}",
+            UNKNOWN: f"made with no recorded {name} version"}.get(before,
+                                                                  f"made with {name} {before}")
+    has = {NOT_INSTALLED: f"this install has no {name}",
+           UNKNOWN: f"this install does not record {name}"}.get(after,
+                                                                f"this install has {after}")
+    return f"{made}, {has}"
+
+
 def finished(job: Job, out: Path) -> bool:
-    """The job's outputs are complete and were made from the same inputs and code."""
+    """The job's outputs are complete and were made from the same inputs and
+    code, with the same library versions."""
     return stale_reason(job, out) is None
 
 
@@ -122,7 +159,8 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
     folder = root / job.name
     try:
         with job_lock(folder):
-            reason = "forced" if force else stale_reason(job, root)
+            fingerprint = resume_fingerprint(job)
+            reason = "forced" if force else stale_reason(job, root, fingerprint)
             if reason is None:
                 return JobResult(job.name, "skipped", message="up to date")
             _clean_stale(folder)
@@ -143,7 +181,8 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             records = sorted((file_record(folder, p) for p in set(files)),
                              key=lambda r: r["path"])
             record = {"tool": f"treebake {__version__}", "job": asdict(job),
-                      "hash": resume_hash(job), "files": records}
+                      "hash": fingerprint.hash, "versions": fingerprint.versions,
+                      "files": records}
             write_text(folder / "job.json", json.dumps(record, indent=2, sort_keys=True) + "\n")
             redone = "" if reason in ("not run yet", "forced") else f"redone: {reason}"
             return JobResult(job.name, "done", time.perf_counter() - start, redone,
