@@ -54,9 +54,10 @@ def recorded_versions(value: object) -> dict[str, str]:
     return {str(k): str(v) for k, v in value.items()}
 
 
-def version_changes(a: dict, b: dict) -> list[VersionChange]:
+def version_changes(a: dict | None, b: dict | None) -> list[VersionChange]:
     """The distributions whose versions differ from `a` to `b`, DISTRIBUTIONS
-    first then the others by name; a side without the name reads UNKNOWN."""
+    first then the others by name; a side without the name reads UNKNOWN
+    (None or a damaged record: no versions at all)."""
     a, b = recorded_versions(a), recorded_versions(b)
     names = [n for n in DISTRIBUTIONS if n in a or n in b]
     names += sorted((set(a) | set(b)) - set(DISTRIBUTIONS))
@@ -64,7 +65,7 @@ def version_changes(a: dict, b: dict) -> list[VersionChange]:
             if a.get(n, UNKNOWN) != b.get(n, UNKNOWN)]
 
 
-def version_differences(a: dict, b: dict) -> list[str]:
+def version_differences(a: dict | None, b: dict | None) -> list[str]:
     """Human-readable lines for version_changes, e.g. "mujoco 3.13.0 -> 4.0.0";
     [] when the records agree (two records both without versions agree)."""
     return [str(c) for c in version_changes(a, b)]
