@@ -142,7 +142,9 @@ COMMANDS: tuple[Command, ...] = (
          OUT,
          opt("--name", help="job name: the output subfolder (default: the scene's name)"),
          opt("--solver", choices=("planar", "full"), default="planar",
-             help="planar: the fast pymunk LOD (default); full: the MuJoCo reference"),
+             help="planar: the planar LOD (default): a linear tier for whole trees, with the "
+                  "pymunk tier and the MuJoCo reference for trees that leave its range; full: "
+                  "the MuJoCo reference for everything"),
          opt("--timestep", metavar="SECONDS",
              help="the full reference's step, e.g. 1/480 (default 1/2000)"),
          opt("--quality", choices=QUALITY,
@@ -251,11 +253,9 @@ COMMANDS: tuple[Command, ...] = (
              help="planar: the LOD; full: the MuJoCo reference; both (default)"),
          opt("--quality", nargs="*", choices=QUALITY,
              help="the LOD's quality levels to run (default: all three)"),
-         opt("--engine", choices=("auto", "articulated", "pymunk"), default="auto",
-             help="the LOD's engine for what leaves its linear tier: auto (default: the "
-                  "reference when MuJoCo is installed), articulated (with pymunk for breaks, "
-                  "cuts and hits: what an install without the `reference` extra runs) or "
-                  "pymunk (everything)"),
+         opt("--engine", choices=("auto", "pymunk"), default="auto",
+             help="auto (default): the engine table of docs/physics.md; pymunk: the pymunk "
+                  "tier for everything that leaves the linear tier"),
          opt("--case", nargs="*", metavar="NAME",
              help="only these cases (quote names with spaces): "
                   f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the long ones "
