@@ -14,6 +14,10 @@ joint or tip by up to the tolerances the file declares
 tolerances (and the report says so), so a glb and its own bake compare as
 the same. A file listed in a manifest.json beside it must still match the
 sha256 recorded there: a damaged or edited export is an error, not a diff.
+
+When the motion differs and the bakes record different library versions
+(meta["versions"], treebake.versions; "unknown" for a bake that records
+none), the report lists them: a new MuJoCo may be the whole story.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from .bake import Bake, TreeBake, load_bake
 from .errors import InputError
 from .rotations import angle_between
 from .sway import segment_ends
+from .versions import version_differences
 
 NOISE_RELATIVE = 4e-7  # float32 round-off on a coordinate, relative to its size
 NOISE_ANGLE = 1e-4  # degrees
@@ -66,10 +71,16 @@ class DiffReport:
     angle_allowance: float = 0.0  # degrees, likewise
     allowance_note: str = ""  # where the allowance comes from
     curves: dict = field(default_factory=dict)  # worst segments' error per frame, for plots
+    # "mujoco 3.13.0 -> 4.0.0" (A -> B) when the motion differs and the versions do
+    version_differences: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict:
+        """The report for JSON: no curves; `version_differences` only when
+        there are some."""
         out = {k: v for k, v in self.__dict__.items() if k != "curves"}
         out["worst"] = [w.__dict__ for w in self.worst]
+        if not self.version_differences:
+            del out["version_differences"]
         return out
 
 
@@ -221,7 +232,9 @@ def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
         first_time=float(a.times[first]) if first is not None else None, worst=worst_rows,
         noise=noise, within=first is None, position_tolerance=user_pos,
         angle_tolerance=user_ang, curves=curves, position_allowance=allow_pos,
-        angle_allowance=allow_ang, allowance_note=note)
+        angle_allowance=allow_ang, allowance_note=note,
+        version_differences=[] if first is None else version_differences(
+            a.meta.get("versions"), b.meta.get("versions")))
 
 
 def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
@@ -249,6 +262,9 @@ def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
         for w in r.worst:
             lines.append(f"    {w.tree} {w.path} (segment {w.segment}): {w.max_position:.3g} m, "
                          f"{w.max_angle:.3g} deg, worst at frame {w.frame}")
+    if r.version_differences:
+        lines.append(f"  made with other versions ({name_a} -> {name_b}):")
+        lines += [f"    {line}" for line in r.version_differences]
     return "\n".join(lines)
 
 

@@ -214,6 +214,73 @@ def test_a_change_of_treebake_code_reruns_jobs(tmp_path, root, monkeypatch):
     assert r.status == "done" and "code" in r.message
 
 
+def test_another_library_version_reruns_jobs_and_says_which(tmp_path, root, monkeypatch):
+    import treebake.batch as batch
+    from treebake.versions import runtime_versions
+
+    here = runtime_versions()
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    out = tmp_path / "out"
+    assert run_batch(jobs, out, workers=1)[0].status == "done"
+    assert json.loads((out / "a" / "job.json").read_text())["versions"] == here
+    assert run_batch(jobs, out, workers=1)[0].status == "skipped"
+    # a farm node with another MuJoCo: redone, and the reason names the version
+    monkeypatch.setattr(batch, "runtime_versions", lambda: {**here, "mujoco": "99.0.0"})
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done"
+    assert r.message == (f"redone: made with mujoco {here['mujoco']}, this install has 99.0.0")
+    assert json.loads((out / "a" / "job.json").read_text())["versions"]["mujoco"] == "99.0.0"
+    assert run_batch(jobs, out, workers=1)[0].status == "skipped"
+    # two libraries at once, each named; numpy missing on this node
+    monkeypatch.setattr(batch, "runtime_versions",
+                        lambda: {**here, "numpy": "not installed", "pymunk": "0.1"})
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done" and "inputs" not in r.message
+    assert r.message == (f"redone: made with numpy {here['numpy']}, this install has no numpy; "
+                         f"made with mujoco 99.0.0, this install has {here['mujoco']}; "
+                         f"made with pymunk {here['pymunk']}, this install has 0.1")
+
+
+def test_a_version_change_with_another_change_says_both(tmp_path, root, monkeypatch):
+    import treebake.batch as batch
+    from treebake.versions import runtime_versions
+
+    here = runtime_versions()
+    grammar = tmp_path / "sapling.lsys"
+    grammar.write_text((root / SAPLING).read_text())
+    jobs = load_jobs(job_file(tmp_path, root, ONE.replace("ROOT/grammars/sapling.lsys",
+                                                          str(grammar))))
+    out = tmp_path / "out"
+    assert run_batch(jobs, out, workers=1)[0].status == "done"
+    grammar.write_text(grammar.read_text() + "\n# edited\n")
+    monkeypatch.setattr(batch, "runtime_versions", lambda: {**here, "numpy": "9.9"})
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done"
+    assert r.message == (f"redone: made with numpy {here['numpy']}, this install has 9.9; "
+                         "and inputs, settings or treebake's code changed")
+
+
+def test_outputs_of_an_older_treebake_without_versions_are_redone(tmp_path, root):
+    import hashlib
+
+    from treebake.fingerprint import code_fingerprint
+
+    jobs = load_jobs(job_file(tmp_path, root, ONE))
+    out = tmp_path / "out"
+    assert run_batch(jobs, out, workers=1)[0].status == "done"
+    path = out / "a" / "job.json"
+    record = json.loads(path.read_text())
+    del record["versions"]  # what an older treebake wrote: its hash without versions
+    record["hash"] = hashlib.sha256(f"{jobs[0].inputs_digest()} code {code_fingerprint()}"
+                                    .encode()).hexdigest()
+    path.write_text(json.dumps(record))
+    r = run_batch(jobs, out, workers=1)[0]
+    assert r.status == "done"
+    assert r.message == "redone: job.json records no library versions (older treebake)"
+    assert "versions" in json.loads(path.read_text())
+    assert run_batch(jobs, out, workers=1)[0].status == "skipped"
+
+
 def test_the_code_fingerprint_covers_every_module():
     from treebake import fingerprint
 

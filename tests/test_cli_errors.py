@@ -152,3 +152,23 @@ def test_help_lists_the_valid_names():
     assert tuple(c.name for c in cases(True)) == cli.STABILITY_CASES
     assert "gusty" in run("accuracy", "--help").stdout
     assert "'near-zero segments'" in run("stability", "--help").stdout
+
+
+def test_help_describes_the_solvers_and_engines_there_are(capsys):
+    """`bake --solver planar` is the planar LOD (linear tier, pymunk tier,
+    MuJoCo reference), not "pymunk"; `stability --engine` has no
+    articulated tier any more."""
+    from treebake.cli import build_parser
+
+    def option(command, flag):
+        sub = next(a for a in build_parser()._actions if a.dest == "command").choices[command]
+        return next(a for a in sub._actions if flag in a.option_strings)
+
+    solver = option("bake", "--solver").help
+    assert solver.startswith("planar: the planar LOD (default): a linear tier for whole trees")
+    assert "fast pymunk" not in solver and "full: the MuJoCo reference for everything" in solver
+    engine = option("stability", "--engine")
+    assert engine.choices == ("auto", "pymunk") and "docs/physics.md" in engine.help
+    with pytest.raises(SystemExit) as exc:
+        main(["stability", "--engine", "articulated"])
+    assert exc.value.code == 2 and "invalid choice: 'articulated'" in capsys.readouterr().err

@@ -92,6 +92,75 @@ def test_cli_exit_codes_json_and_plot(bake, root, tmp_path, capsys):
     assert main(["diff", str(a), str(c)]) == 2
 
 
+MADE_BEFORE = {"treebake": "0.1.0", "numpy": "2.3.0", "mujoco": "3.13.0", "pymunk": "7.3.1"}
+MADE_AFTER = {**MADE_BEFORE, "numpy": "2.4.6", "mujoco": "4.0.0"}
+
+
+def test_version_differences_name_each_change_and_unknown_sides():
+    from treebake.versions import runtime_versions, version_differences
+
+    assert version_differences(MADE_BEFORE, MADE_AFTER) == ["numpy 2.3.0 -> 2.4.6",
+                                                            "mujoco 3.13.0 -> 4.0.0"]
+    assert version_differences(MADE_AFTER, MADE_AFTER) == []
+    assert version_differences({}, {}) == [] and version_differences(None, {}) == []
+    assert version_differences({}, {"mujoco": "4.0.0"}) == ["mujoco unknown -> 4.0.0"]
+    assert version_differences({"numba": "0.60"}, {}) == ["numba 0.60 -> unknown"]
+    here = runtime_versions()
+    assert list(here) == ["treebake", "numpy", "mujoco", "pymunk"]
+    assert all(isinstance(v, str) and v for v in here.values())
+    assert here["numpy"] == np.__version__ and here is not runtime_versions()
+
+
+def _versioned(bake, versions, push=0.0):
+    """A copy of the bake that records `versions` (None: none, as bakes made
+    before versions were recorded), one segment pushed `push` m in one frame."""
+    other = copy.deepcopy(bake)
+    other.meta.pop("versions", None)
+    if versions is not None:
+        other.meta["versions"] = dict(versions)
+    other.trees[0].positions[3, 2] += np.float32(push)
+    return other
+
+
+def test_diff_names_the_versions_that_differ_when_the_motion_does(bake, tmp_path, capsys):
+    import json
+
+    a = save_bake(_versioned(bake, MADE_BEFORE), tmp_path / "a.npz")
+    b = save_bake(_versioned(bake, MADE_AFTER, push=0.5), tmp_path / "b.npz")
+    capsys.readouterr()
+    assert main(["diff", str(a), str(b)]) == 1
+    text = capsys.readouterr().out
+    assert text.endswith(f"  made with other versions ({a} -> {b}):\n"
+                         "    numpy 2.3.0 -> 2.4.6\n    mujoco 3.13.0 -> 4.0.0\n")
+    assert main(["diff", str(a), str(b), "--json"]) == 1
+    report = json.loads(capsys.readouterr().out)
+    assert report["version_differences"] == ["numpy 2.3.0 -> 2.4.6", "mujoco 3.13.0 -> 4.0.0"]
+    # a bake from before versions were recorded: its side is unknown
+    old = save_bake(_versioned(bake, None), tmp_path / "old.npz")
+    assert main(["diff", str(old), str(b)]) == 1
+    assert "    mujoco unknown -> 4.0.0\n" in capsys.readouterr().out
+
+
+def test_diff_says_nothing_of_versions_when_they_agree_or_the_motion_does(bake, tmp_path,
+                                                                         capsys):
+    import json
+
+    a = save_bake(_versioned(bake, MADE_AFTER), tmp_path / "a.npz")
+    moved = save_bake(_versioned(bake, MADE_AFTER, push=0.5), tmp_path / "moved.npz")
+    capsys.readouterr()
+    assert main(["diff", str(a), str(moved)]) == 1  # same versions: nothing extra
+    assert "version" not in capsys.readouterr().out
+    assert main(["diff", str(a), str(moved), "--json"]) == 1
+    assert "version_differences" not in json.loads(capsys.readouterr().out)
+    same = save_bake(_versioned(bake, MADE_BEFORE), tmp_path / "same.npz")
+    assert main(["diff", str(a), str(same)]) == 0  # versions differ, motion does not
+    assert "version" not in capsys.readouterr().out
+    assert main(["diff", str(a), str(same), "--json"]) == 0
+    assert "version_differences" not in json.loads(capsys.readouterr().out)
+    neither = _versioned(bake, None, push=0.5)  # two bakes without versions agree
+    assert diff_bakes(_versioned(bake, None), neither).version_differences == []
+
+
 def test_gltf_files_diff_like_their_bakes(bake, tmp_path):
     """Exported glb files read back (our reader samples the channels) and
     compare: the same bake twice is identical; a 5 cm push of one segment

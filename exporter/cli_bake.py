@@ -1,0 +1,204 @@
+"""`treebake bake`, `export` and `preview`: a scene or grammar to a bake,
+a bake to files."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from .cli_progress import plural, progress_bar, stage_progress
+from .errors import InputError
+from .fileio import check_writable
+from .library import resolve
+
+
+def load_job(path: str, args):
+    """A scene file, or a grammar baked alone in a default scene (a gusty
+    moderate breeze unless --wind says otherwise). Command-line overrides
+    are validated like the file's own keys."""
+    from .scene import load_job as load
+
+    if Path(path).suffix.lower() == ".npz":
+        raise InputError(f"{path} is a bake, not a scene: `treebake bake` takes a scene (.toml) "
+                         f"or a grammar (.lsys); to turn a bake into files use `treebake export "
+                         f"{path}` (or `treebake preview {path}`)")
+    p = resolve(path)  # a file, or a bundled grammar or preset by name
+    if p.suffix.lower() not in (".toml", ".lsys"):
+        raise InputError(f"{p}: `treebake bake` takes a scene file (.toml), a grammar (.lsys) "
+                         "or a bundled name (oak, preset:felling; `treebake list`)")
+    overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
+                                   ("seed", args.seed), ("quality", args.quality),
+                                   ("wind.speed", args.wind)) if v is not None}
+    return load(p, overrides)
+
+
+def _parse_timestep(text: str) -> float:
+    """'1/480' or '0.002' (s) -> seconds, within 1e-5..1/60 s."""
+    try:
+        num, _, den = text.partition("/")
+        value = float(num) / float(den) if den else float(num)
+    except (ValueError, ZeroDivisionError):
+        raise InputError(f"--timestep = {text!r} is not a number of seconds "
+                         "(e.g. 1/480 or 0.002)") from None
+    if not 1e-5 <= value <= 1 / 60:
+        raise InputError(f"--timestep = {text} s is outside 1e-5 .. 1/60 s")
+    return value
+
+
+def job_name(name: str) -> str:
+    """`name` if it can be the job's output subfolder, else InputError."""
+    if not name or any(c in name for c in "/\\") or name in (".", ".."):
+        raise InputError(f"job name {name!r} cannot be a folder name (--name)")
+    return name
+
+
+def cmd_bake(args) -> int:
+    import os
+
+    from .bake import save_bake
+    from .export import check_options
+    from .fileio import job_lock
+    from .pipeline import bake_scene
+
+    scene = load_job(args.job, args)
+    out = Path(args.out) / job_name(args.name or scene.name)
+    log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
+    progress = None if args.quiet else progress_bar("simulating")
+    workers = args.workers or os.cpu_count() or 1
+    if workers < 1:
+        raise InputError(f"--workers must be >= 1, got {args.workers}")
+    timestep = None
+    if args.timestep is not None:
+        if args.solver != "full":
+            raise InputError("--timestep is the full reference's step: use it with --solver full "
+                             "(the planar LOD's steps come from --quality)")
+        timestep = _parse_timestep(args.timestep)
+    if args.format is None and scene.formats:
+        args.format = ",".join(f for f in scene.formats if f != "npz")
+    opts = None
+    if args.format is not None:  # checked now, not after the simulation
+        opts = export_options(args, allow_none=True)
+        check_options(opts)
+    with job_lock(out):  # proves the folder writable; one run per job folder at a time
+        bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
+                          workers=workers, timestep=timestep)
+        path = save_bake(bake, out / f"{out.name}.npz")
+        exported = None
+        if opts is not None and opts.formats:
+            exported = run_export(bake, path, args.out, out.name, opts, args)
+    t = bake.timing
+    summary = {"bake": str(path), "trees": len(bake.trees),
+               "simulated": sum(1 for tb in bake.trees if not tb.static),
+               "segments": sum(tb.n_segments for tb in bake.trees),
+               "frames": len(bake.times), "notes": bake.meta.get("notes", []),
+               "wall_seconds": t.get("wall_seconds")}
+    if exported is not None:
+        summary["export"] = export_summary(exported)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"baked {plural(summary['trees'], 'tree')} ({summary['simulated']} simulated, "
+              f"{plural(summary['segments'], 'segment')}), {plural(summary['frames'], 'frame')}"
+              f" in {summary['wall_seconds']:.1f} s -> {path}")
+        if exported is not None:
+            print_export(exported)
+    return 0
+
+
+def export_options(args, allow_none: bool = False):
+    """ExportOptions from the command line; an empty --format is an error
+    (it used to export glb silently); allow_none: `npz` alone is fine
+    (bake: the bake is all that is wanted)."""
+    import math
+
+    from .exchange.anim import ReduceOptions
+    from .exchange.mesh import MeshOptions
+    from .export import FORMATS, ExportOptions, parse_formats
+
+    text = getattr(args, "format", None)
+    formats = parse_formats(text if text is not None else "glb")
+    if not formats and not (allow_none and text and text.strip(" ,").lower() == "npz"):
+        raise InputError(f"--format {text!r} names no export format; choose from: "
+                         f"{', '.join(FORMATS)} (comma-separated)")
+    return ExportOptions(
+        formats=formats,
+        mesh=MeshOptions(radial=args.radial, rings=args.rings, leaves=not args.no_leaves),
+        reduce=ReduceOptions(position_tolerance=args.position_tolerance,
+                             angle_tolerance=math.radians(args.angle_tolerance),
+                             enabled=not args.no_reduce),
+        split=args.split, obj_stride=args.stride, preview_size=args.size,
+        frame_start=args.frame_start, textures=not args.no_textures)
+
+
+def run_export(bake, bake_path, out, name, opts, args):
+    """export_bake into OUT/<name>/ with stage progress unless --quiet."""
+    from .export import export_bake
+
+    progress = None if getattr(args, "quiet", False) else stage_progress()
+    return export_bake(bake, out, name, opts, bake_path=bake_path, progress=progress)
+
+
+def export_summary(report) -> dict:
+    """An export's folder, file count, bytes, animation and sizes, for --json."""
+    m = report.manifest
+    return {"folder": str(report.folder), "files": len(m["files"]),
+            "bytes": m["total_bytes"], "animation": m.get("animation", {}),
+            "sizes": m["sizes"]}
+
+
+def print_export(report) -> None:
+    """An export's files and keyframe reduction, as text on stdout."""
+    m = report.manifest
+    a = m.get("animation")
+    names = [e["path"] for e in m["files"]] + ["manifest.json"]
+    print(f"exported {plural(len(names), 'file')}, {m['total_bytes'] / 1e6:.1f} MB -> "
+          f"{report.folder}: {', '.join(names)}")
+    if a and a.get("keys_full"):
+        print(f"keyframes: {a['keys_written']:,} of {a['keys_full']:,} written "
+              f"({100 * a['keys_kept_fraction']:.1f} %), {a['channels_written']:,} of "
+              f"{a['channels']:,} channels; worst error {a['max_position_error_m'] * 1e3:.3g} mm, "
+              f"{a['max_angle_error_deg']:.3g} deg")
+
+
+def cmd_export(args) -> int:
+    from .bake import load_bake
+    from .export import check_options
+    from .fileio import job_lock
+
+    path = Path(args.bake)
+    if not path.is_file():
+        raise InputError(f"{path}: bake file not found")
+    opts = export_options(args)
+    check_options(opts)
+    bake = load_bake(path)
+    name = job_name(args.name or str(bake.meta.get("scene") or "bake"))
+    with job_lock(Path(args.out) / name):
+        report = run_export(bake, path, args.out, name, opts, args)
+    if args.json:
+        print(json.dumps(export_summary(report)))
+    else:
+        print_export(report)
+    return 0
+
+
+def cmd_preview(args) -> int:
+    from .bake import load_bake
+    from .export import write_previews
+
+    path = Path(args.bake)
+    if not path.is_file():
+        raise InputError(f"{path}: bake file not found")
+    if not 64 <= args.size <= 2048:
+        raise InputError(f"--size must be in 64..2048 px, got {args.size}")
+    bake = load_bake(path)
+    name = job_name(args.name or str(bake.meta.get("scene") or path.stem))
+    folder = check_writable(Path(args.out) / name)
+    stage = None if args.quiet else stage_progress()
+    progress = None if stage is None else (lambda d, t: stage("preview", d, t))
+    files = write_previews(bake, folder, name, args.size, progress=progress)
+    if args.json:
+        print(json.dumps({"files": [str(f) for f in files]}))
+    else:
+        print("written: " + ", ".join(str(f) for f in files))
+    return 0

@@ -1,0 +1,61 @@
+"""`treebake diff` and `batch`: regression diffs between bakes, and many
+bakes from a job file (docs/batch.md)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from .cli_progress import BatchDisplay, plural
+from .errors import InputError
+from .fileio import write_text
+
+
+def cmd_diff(args) -> int:
+    from .diff import diff_bakes, exit_code, format_report, load_any, plot_report
+
+    a, b = load_any(args.a), load_any(args.b)
+    report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)
+    if args.plot:
+        plot_report(report, a.times, args.plot)
+    if args.json:
+        print(json.dumps(report.as_dict()))
+    else:
+        print(format_report(report, args.a, args.b))
+    return exit_code(report)
+
+
+def cmd_batch(args) -> int:
+    import os
+
+    from .batch import format_table, load_jobs, run_batch, summary
+    from .fileio import check_writable, check_writable_file
+
+    jobs = load_jobs(args.jobs_file)
+    workers = args.jobs or os.cpu_count() or 1
+    if workers < 1:
+        raise InputError(f"--jobs must be >= 1, got {args.jobs}")
+    summary_path = Path(args.summary or Path(args.out) / "batch-summary.json")
+    check_writable(args.out)
+    check_writable_file(summary_path)
+    show = BatchDisplay(len(jobs), quiet=args.json)
+    start = time.perf_counter()
+    results = run_batch(jobs, args.out, workers, args.force, args.executor, args.scheduler,
+                        report=show, worker_timeout=args.worker_timeout)
+    data = summary(results, time.perf_counter() - start, show.workers)
+    write_text(summary_path, json.dumps(data, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(data))
+    else:
+        print(format_table(results))
+        line = (f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed")
+        if data["interrupted"]:
+            line += f", {data['interrupted']} interrupted"
+        print(f"{line} in {data['wall_seconds']:.1f} s with {plural(data['workers'], 'worker')}"
+              f"; summary: {summary_path}")
+    if data["interrupted"]:
+        print("treebake: interrupted; rerun the same command to resume", file=sys.stderr)
+        return 130
+    return 1 if data["failed"] else 0

@@ -1,0 +1,132 @@
+"""Progress on stderr for the `treebake` commands: a redrawn
+bar on a terminal; elsewhere (logs, CI, `| tee`) plain lines every
+PLAIN_PROGRESS_SECONDS and one at the end."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+PLAIN_PROGRESS_SECONDS = 5.0  # without a terminal: a plain progress line this often
+
+
+def plain_interval() -> float:
+    """Seconds between plain progress lines (TREEBAKE_PROGRESS_SECONDS overrides)."""
+    import os
+
+    try:
+        return max(0.0, float(os.environ.get("TREEBAKE_PROGRESS_SECONDS", "")))
+    except ValueError:
+        return PLAIN_PROGRESS_SECONDS
+
+
+def progress_bar(label: str):
+    """Progress on stderr: a redrawn bar on a terminal; elsewhere (logs, CI,
+    `| tee`) a plain line every few seconds and one at the end."""
+    start = time.perf_counter()
+    tty = sys.stderr.isatty()
+    last = [start]
+
+    def show(done: int, total: int) -> None:
+        elapsed = time.perf_counter() - start
+        eta = elapsed / max(done, 1) * (total - done)
+        if not tty:
+            if done >= total:
+                sys.stderr.write(f"{label}: {done}/{total} frames, done in {elapsed:.1f} s\n")
+            elif time.perf_counter() - last[0] >= plain_interval():
+                last[0] = time.perf_counter()
+                sys.stderr.write(f"{label}: {done}/{total} frames "
+                                 f"({100 * done / max(total, 1):.0f} %), {eta:.0f} s left\n")
+            else:
+                return
+            sys.stderr.flush()
+            return
+        width = 30
+        filled = int(width * done / max(total, 1))
+        sys.stderr.write(f"\r{label} [{'#' * filled}{'.' * (width - filled)}] "
+                         f"{done}/{total} frames, {eta:4.0f} s left ")
+        if done >= total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return show
+
+
+def stage_progress():
+    """Progress on stderr for export stages: a bar on a terminal, plain
+    lines (every few seconds and at each stage's end) elsewhere."""
+    start = time.perf_counter()
+    tty = sys.stderr.isatty()
+    last = [start]
+
+    def show(stage: str, done: int, total: int) -> None:
+        elapsed = time.perf_counter() - start
+        if not tty:
+            if done >= total or time.perf_counter() - last[0] >= plain_interval():
+                last[0] = time.perf_counter()
+                sys.stderr.write(f"exporting {stage}: {done}/{total}, {elapsed:.1f} s\n")
+                sys.stderr.flush()
+            return
+        width = 30
+        filled = int(width * done / max(total, 1))
+        sys.stderr.write(f"\rexporting {stage:<7} [{'#' * filled}{'.' * (width - filled)}] "
+                         f"{done}/{total}  {elapsed:5.1f} s ")
+        if done >= total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    return show
+
+
+def plural(n: int, word: str) -> str:
+    """'1 tree', '2 trees'."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+class BatchDisplay:
+    """Progress of a batch on stderr: one line per finished (or retried) job;
+    on a terminal a live line with every running job's frame count, else
+    that status as a plain line every PLAIN_PROGRESS_SECONDS. Remembers
+    the most workers the run reported (the summary's count)."""
+
+    def __init__(self, total: int, quiet: bool = False) -> None:
+        self.total, self.quiet = total, quiet
+        self.tty = sys.stderr.isatty()
+        self.running: dict[str, str] = {}
+        self.finished = 0
+        self.workers = 0
+        self.last_plain = time.monotonic()
+
+    def __call__(self, event: str, data) -> None:
+        if event == "workers":
+            self.workers = max(self.workers, int(data))
+            return
+        if event == "start":
+            self.running[data] = "starting"
+        elif event == "progress":
+            name, done, frames = data
+            self.running[name] = f"{done}/{frames}"
+        elif event == "retry":
+            self._line(f"[{self.finished}/{self.total}] {data[0]}: {data[1]}")
+        elif event == "end":
+            self.running.pop(data.name, None)
+            self.finished += 1
+            line = f"[{self.finished}/{self.total}] {data.name}: {data.status}"
+            if data.message:
+                line += f" ({data.message})"
+            self._line(line)
+        if self.quiet or not self.running:
+            return
+        live = "  ".join(f"{k} {v}" for k, v in sorted(self.running.items()))
+        if self.tty:
+            sys.stderr.write(f"\r\033[K[{self.finished}/{self.total}] {live}"[:200])
+            sys.stderr.flush()
+        elif time.monotonic() - self.last_plain >= plain_interval():
+            self.last_plain = time.monotonic()
+            self._line(f"[{self.finished}/{self.total}] running: {live}"[:400])
+
+    def _line(self, text: str) -> None:
+        if self.quiet:
+            return
+        sys.stderr.write(("\r\033[K" if self.tty else "") + text + "\n")
+        sys.stderr.flush()
