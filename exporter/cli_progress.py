@@ -27,25 +27,27 @@ def progress_bar(label: str):
     tty = sys.stderr.isatty()
     last = [start]
 
-    def show(done: int, total: int) -> None:
+    def show(done: float, total: float) -> None:
+        # `done` and `total` in any units that grow (frames, the LOD's planned work)
         elapsed = time.perf_counter() - start
-        eta = elapsed / max(done, 1) * (total - done)
+        share = min(1.0, done / total) if total > 0 else 1.0
+        eta = elapsed / share * (1.0 - share) if share > 0 else float("nan")
+        left = f"{eta:.0f} s left" if eta == eta else "estimating"
         if not tty:
-            if done >= total:
-                sys.stderr.write(f"{label}: {done}/{total} frames, done in {elapsed:.1f} s\n")
+            if share >= 1.0:
+                sys.stderr.write(f"{label}: done in {elapsed:.1f} s\n")
             elif time.perf_counter() - last[0] >= plain_interval():
                 last[0] = time.perf_counter()
-                sys.stderr.write(f"{label}: {done}/{total} frames "
-                                 f"({100 * done / max(total, 1):.0f} %), {eta:.0f} s left\n")
+                sys.stderr.write(f"{label}: {100 * share:.0f} %, {left}\n")
             else:
                 return
             sys.stderr.flush()
             return
         width = 30
-        filled = int(width * done / max(total, 1))
+        filled = int(width * share)
         sys.stderr.write(f"\r{label} [{'#' * filled}{'.' * (width - filled)}] "
-                         f"{done}/{total} frames, {eta:4.0f} s left ")
-        if done >= total:
+                         f"{100 * share:3.0f} %, {left:>14} ")
+        if share >= 1.0:
             sys.stderr.write("\n")
         sys.stderr.flush()
 

@@ -14,6 +14,7 @@ from .bake import Bake, ObjectsBake, tree_bake_from_motion
 from .grow import GrownTree, extent, grow
 from .quality import Quality
 from .scene import Scene
+from .sim.events import summary
 from .sim.loads import SceneLoads
 from .sim.rigging import RiggedScene, rig_scene
 from .sim.run import SolverKind, simulate, solver_for
@@ -50,6 +51,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         result = simulate(sim, scene.fps, progress)
         meta.update(result.meta, notes=result.notes)
         timing.update(result.timing)
+    for line in summary({name: m.events for name, m in result.motions.items()}):
+        log(line)
     for note in result.notes:
         log(note)
     trees = bake_trees(grown, rigged, result, scene.file, kind)

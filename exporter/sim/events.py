@@ -47,3 +47,32 @@ class Event:
         where = f"{self.segment}: " if self.segment else ""
         what = f"{self.kind} ({self.detail})" if self.detail else self.kind
         return f"t = {self.time:.3f} s: {where}{what}"
+
+
+def summary(events_by_tree: dict[str, list[Event]]) -> list[str]:
+    """For people (the bake's log): one line per tree and kind of event,
+    with how many and when ("oak: 212 joints broke between 4.33 and 6.10 s")."""
+    lines = []
+    for tree, events in events_by_tree.items():
+        for kind in KINDS:
+            mine = [e for e in events if e.kind == kind]
+            if mine:
+                lines.append(f"{tree}: {_kind_line(kind, mine)}")
+    return lines
+
+
+_WHAT = {BROKE: ("joint broke", "joints broke"), UPROOTED: ("uprooted", "uprooted"),
+         CUT: ("cut", "cut"), HINGE: ("hinge snapped", "hinges snapped"),
+         AT_REST: ("at rest", "at rest"), TIER: ("changed engine", "changed engine")}
+
+
+def _kind_line(kind: str, events: list[Event]) -> str:
+    first, last = events[0].time, events[-1].time
+    one, many = _WHAT[kind]
+    when = f"at {first:.2f} s" if len(events) == 1 else f"between {first:.2f} and {last:.2f} s"
+    if kind == TIER:
+        count = "once" if len(events) == 1 else f"{len(events)} times"
+        return f"{one} {count} {when} (first: {events[0].detail})"
+    if kind in (BROKE,) or len(events) > 1:
+        return f"{len(events)} {one if len(events) == 1 else many} {when}"
+    return f"{one} {when}" + (f" ({events[0].detail})" if events[0].detail else "")

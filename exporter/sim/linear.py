@@ -294,9 +294,6 @@ class LinearTier:
             tree = self.trees[self.members[int(self.bones.bone_tree[worst])]]
             path = tree.rig.model.segment_paths()[self.locate(worst)[1]]
             self.stats.refined.append((t, tree.name, path, float(error[worst])))
-            self.log(f"t = {t:.3f} s: linear steps split in {self.stats.parts} (the step's error "
-                     f"at {tree.name} {path}: {error[worst]:.2%} of its height, past "
-                     f"{ERROR_TOLERANCE:.2%})")
 
     def _keep_before_blast(self) -> None:
         """Keep each member tree's state at the start of the step in which a

@@ -107,6 +107,8 @@ class PlanarLOD:
                                                            progress)
         results = simulate(self.trees, plan, self.scene, self.extent, self.workers, self.log,
                            tick)
+        if tick is not None:
+            tick.finish()
         motions, tiers = {}, {}
         for (_, members), res in zip(plan, results):
             for i, motion, spans in zip(members, res.motions, res.spans):
@@ -155,7 +157,10 @@ def _timing(reports: list[TierReport], scene: Scene) -> dict:
         if f is not None and len(f):  # a tier started late covers the last frames
             f = np.asarray(f[-len(frame_seconds):])
             frame_seconds[len(frame_seconds) - len(f):] += f
-    return {"step_seconds": round(step, 3), "update_seconds": round(update, 3),
+    engines = {e.value: {"cpu_seconds": round(sum(r.timing["cpu_seconds"] for r in rs), 3),
+                         "segment_frames": sum(r.timing["segment_frames"] for r in rs)}
+               for e in Engine if (rs := [r for r in reports if r.engine is e])}
+    return {"engines": engines, "step_seconds": round(step, 3), "update_seconds": round(update, 3),
             "build_seconds": round(sum(r.timing.get("build_seconds", 0.0) for r in reports), 3),
             "segment_steps": sum(r.timing.get("segment_steps", 0) for r in reports),
             **frame_timing(frame_seconds, 1)}

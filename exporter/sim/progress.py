@@ -2,9 +2,12 @@
 planned, in units of one segment's frame in the linear tier, so that an ETA
 counts what the nonlinear engines will still cost. The plan starts from
 what the scene says (cuts and projectiles send trees to a nonlinear engine
-at known times) and follows the hand-offs as they come."""
+at known times; a felled tree costs more once it falls) and follows the
+hand-offs as they come."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -12,10 +15,15 @@ from ..quality import Quality, TierPolicy
 from ..scene import Scene
 from .common import SimTree
 from .handoff import Engine, Reason, engine_for
+from .rules import FELL_NUDGE
 
 # CPU per segment and frame, relative to the linear tier's, at `default`
-# (docs/physics.md, "What each engine costs"; bench/presets.py)
+# (docs/physics.md, "What each engine costs")
 COST = {Engine.LINEAR: 1.0, Engine.PYMUNK: 40.0, Engine.REFERENCE: 25.0}
+# a felled tree costs this much more once it turns fast (split steps), falls
+# free and meets the ground: from when it leans FAST_LEAN of its hinge angle
+FALLEN = 5.0
+FAST_LEAN = 0.25
 
 
 class ChunkProgress:
@@ -23,7 +31,7 @@ class ChunkProgress:
 
     def __init__(self, trees: list[SimTree], plan: list[tuple[Quality, list[int]]],
                  scene: Scene, report):
-        self.report, self.frames = report, scene.frame_count - 1
+        self.report = report
         self.done = 0.0
         self.chunks = [ChunkPlan([trees[i] for i in members], q, scene, self)
                        for q, members in plan]
@@ -43,21 +51,30 @@ class ChunkProgress:
     def tell(self) -> None:
         self.report(self.done, max(self.planned, self.done))
 
+    def finish(self) -> None:
+        """Every chunk is done: whatever the plan still held was not needed."""
+        self.report(1.0, 1.0)
+
 
 class ChunkPlan:
-    """One chunk's planned cost per tree and frame (segments x COST)."""
+    """One chunk's planned work per tree and frame: its size (segments, more
+    while a felled tree falls) times its engine's COST."""
 
     def __init__(self, trees: list[SimTree], quality: Quality, scene: Scene,
                  owner: ChunkProgress):
-        self.owner, self.quality = owner, quality
+        self.owner = owner
         frames = scene.frame_count
-        self.segments = np.array([t.rig.model.n_segments for t in trees], dtype=float)
+        segments = np.array([t.rig.model.n_segments for t in trees], dtype=float)
+        self.size = np.repeat(segments[:, None], frames, axis=1)
         start = Engine.PYMUNK if quality.tier is TierPolicy.PYMUNK else Engine.LINEAR
-        self.cost = np.full((len(trees), frames), COST[start]) * self.segments[:, None]
+        self.cost = COST[start] * self.size
         for i, t in enumerate(trees):
-            if t.cut is not None:  # known: it leaves for the cut's engine then
+            if t.cut is not None:  # known: it leaves for the cut's engine then, and falls
                 f = min(frames - 1, int(t.cut.time * scene.fps))
-                self.cost[i, f:] = COST[engine_for(Reason.CUT, quality)] * self.segments[i]
+                fall = min(frames - 1, int((t.cut.time + lean_time(t, scene, FAST_LEAN))
+                                          * scene.fps))
+                self.size[i, fall:] *= FALLEN
+                self.cost[i, f:] = COST[engine_for(Reason.CUT, quality)] * self.size[i, f:]
         self.cost[:, 0] = 0.0  # frame 0 is the rest pose
 
     @property
@@ -66,7 +83,8 @@ class ChunkPlan:
 
     def start(self, engine: Engine, trees: list[int], frame: int) -> None:
         """Trees go to `engine` from `frame`: their plan from there."""
-        self.cost[trees, max(frame, 1):] = COST[engine] * self.segments[trees, None]
+        f = max(frame, 1)
+        self.cost[trees, f:] = COST[engine] * self.size[trees, f:]
         self.owner.tell()
 
     def tick(self, engine: Engine, trees: list[int], frame: int) -> None:
@@ -74,3 +92,13 @@ class ChunkPlan:
         if frame > 0:
             self.owner.done += float(self.cost[trees, frame].sum())
             self.owner.tell()
+
+
+def lean_time(tree: SimTree, scene: Scene, share: float) -> float:
+    """Seconds from a tree's felling cut until it leans `share` of its hinge
+    angle (at 1 the hinge snaps and it falls free), as a rigid rod of the
+    tree's height tipping about its base from the feller's nudge:
+    theta(t) = (w0 / lam) sinh(lam t), lam^2 = 3 g / (2 H). For the ETA."""
+    height = max(float(tree.rig.model.height), 0.1)
+    lam = math.sqrt(3.0 * max(scene.gravity, 1e-3) / (2.0 * height))
+    return math.asinh(share * math.radians(tree.cut.hinge) * lam / FELL_NUDGE) / lam

@@ -13,7 +13,7 @@ each engine it was in, in order (`TreeRecord`)."""
 
 from __future__ import annotations
 
-import math
+import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 
@@ -140,7 +140,9 @@ class Chunk:
         for i, m in zip(run.trees, tier.motions()):
             self.records[i].take(m, tier.first_frame, self.work_before.get(i, 0.0),
                                  self.scene.fps)
-        self.reports.append(tier.report())
+        report = tier.report()
+        report.timing.update(cpu_seconds=self.cpu, segment_frames=self.segment_frames)
+        self.reports.append(report)
         tracks = getattr(tier, "tracks", lambda: None)()
         if tracks is not None:
             self.objects = tracks
@@ -153,7 +155,9 @@ class Chunk:
         live = list(run.trees)
         if self.progress is not None:
             self.progress.start(run.engine, live, tier.first_frame)
+        self.cpu, self.segment_frames = -time.process_time(), 0
         for f in range(tier.first_frame, self.last_frame + 1):
+            self.segment_frames += sum(self.trees[i].rig.model.n_segments for i in live)
             left = tier.advance_to(f)
             if left:
                 out.append([ho.offset_work(self.work_before.get(run.trees[ho.tree], 0.0))
@@ -162,6 +166,7 @@ class Chunk:
                 live = [i for i in live if i not in gone]
             if self.progress is not None:
                 self.progress.tick(run.engine, live, f)
+        self.cpu += time.process_time()
         return out
 
     def follow(self, run: Run, leaving: list[list[HandOff]]) -> list[Run]:
