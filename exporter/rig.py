@@ -113,10 +113,6 @@ class Rig:
         n = np.linalg.norm(v, axis=1, keepdims=True)
         return np.divide(v, n, out=np.tile([0.0, 0.0, 1.0], (len(v), 1)), where=n > 0)
 
-    @property
-    def is_root(self) -> np.ndarray:
-        return self.bone_parent < 0
-
     def main_stem(self) -> np.ndarray:
         """Bones of the main stem (TreeModel.main_stem), ground up."""
         return np.unique(self.seg_bone[self.model.main_stem()])

@@ -240,12 +240,6 @@ def subtree_reach(parent: np.ndarray, base: np.ndarray, tips: np.ndarray) -> np.
     return reach
 
 
-def _constant_masks(t_loc, q_loc, tol_t, tol_q):
-    tv = np.swapaxes(t_loc, 0, 1)
-    qv = np.swapaxes(q_loc, 0, 1)
-    return _constant(tv, tol_t, False), _constant(qv, tol_q, True)
-
-
 def _subtree(parent: np.ndarray, rows: np.ndarray):
     """The joints `rows` (whole trees, sorted) with parents renumbered."""
     new = np.full(len(parent), -1, dtype=np.int64)

@@ -25,7 +25,6 @@ MAX_FILE_BYTES = 1_000_000
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
 _ARROW = re.compile(r"-\((?P<prob>[^()]*)\)->|-->|→|(?<!<)->")
-_RESERVED = set("(),:")
 
 
 @dataclass(frozen=True)
@@ -52,10 +51,6 @@ class Production:
     probabilities: tuple[float, ...]
     file: str
     line: int
-
-    @property
-    def arity(self) -> int:
-        return sum(len(p.params) for p in (*self.left, self.pred, *self.right))
 
 
 @dataclass(frozen=True)
