@@ -18,6 +18,7 @@ from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
 from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
 from .symbols import AT_COMMANDS
+from .toplevel import find_top, rfind_top, split_top
 
 Module = tuple[str, tuple[float, ...]]
 
@@ -335,7 +336,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
                 raise err(f"{key} lists symbols without parameters", col)
             settings[key] = frozenset(m.symbol for m in mods)
         elif key == "tropism":
-            parts = _split_top(value, col)
+            parts = split_top(value, col)
             if len(parts) != 3:
                 raise err("tropism needs three numbers: x, y, z (world frame, Z up)", col)
             vec = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
@@ -395,49 +396,6 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
     )
 
 
-def _split_top(text: str, col0: int) -> list[tuple[str, int]]:
-    """Split on commas (or whitespace when there are none) outside parentheses."""
-    parts, depth, start = [], 0, 0
-    if "," not in text:
-        return [(m.group(), col0 + m.start()) for m in re.finditer(r"\S+", text)]
-    for i, ch in enumerate(text):
-        if ch == "(":
-            depth += 1
-        elif ch == ")":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append((text[start:i], col0 + start))
-            start = i + 1
-    parts.append((text[start:], col0 + start))
-    return parts
-
-
-def _find_top(text: str, chars: str, start: int = 0) -> int:
-    depth = 0
-    for i in range(start, len(text)):
-        ch = text[i]
-        if ch == "(":
-            depth += 1
-        elif ch == ")":
-            depth -= 1
-        elif depth == 0 and ch in chars:
-            return i
-    return -1
-
-
-def _rfind_top(text: str, ch: str) -> int:
-    depth = 0
-    for i in range(len(text) - 1, -1, -1):
-        c = text[i]
-        if c == ")":
-            depth += 1
-        elif c == "(":
-            depth -= 1
-        elif depth == 0 and c == ch:
-            return i
-    return -1
-
-
 def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, ...]:
     if text.strip() == "*":
         return ()
@@ -470,7 +428,7 @@ def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float]
             prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
                                      col=m.start("prob"))
         else:
-            colon = _rfind_top(rhs, ":")
+            colon = rfind_top(rhs, ":")
             if colon >= 0:
                 prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
                                          col=rhs_col + colon + 1)
@@ -478,19 +436,19 @@ def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float]
         if prob is not None and not 0.0 <= prob <= 1.0:
             raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
 
-        colon = _find_top(lhs, ":")
+        colon = find_top(lhs, ":")
         cond_text, cond_col = None, 0
         if colon >= 0:
             cond_text, cond_col = lhs[colon + 1:], colon + 1
             lhs = lhs[:colon]
         if not lhs.strip():
             raise err("production has no predecessor", 0)
-        lt = _find_top(lhs, "<")
-        gt = _find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
-        if lt >= 0 and _find_top(lhs, "<", lt + 1) >= 0:
-            raise err("more than one '<' in predecessor", _find_top(lhs, "<", lt + 1))
-        if gt >= 0 and _find_top(lhs, ">", gt + 1) >= 0:
-            raise err("more than one '>' in predecessor", _find_top(lhs, ">", gt + 1))
+        lt = find_top(lhs, "<")
+        gt = find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
+        if lt >= 0 and find_top(lhs, "<", lt + 1) >= 0:
+            raise err("more than one '<' in predecessor", find_top(lhs, "<", lt + 1))
+        if gt >= 0 and find_top(lhs, ">", gt + 1) >= 0:
+            raise err("more than one '>' in predecessor", find_top(lhs, ">", gt + 1))
         pred_start = lt + 1 if lt >= 0 else 0
         pred_end = gt if gt >= 0 else len(lhs)
         left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
