@@ -260,6 +260,21 @@ def load_grammar(path: str | Path) -> Grammar:
     return parse_grammar(text, file=str(p), name=p.stem)
 
 
+def _err_at(file: str, lineno: int):
+    """`err(message, col)` for one line: a GrammarError at 0-based column col."""
+    return lambda message, col: GrammarError(message, file, lineno, col + 1)
+
+
+@dataclass
+class _FileParts:
+    """A grammar's lines sorted: the defines' values, the settings' texts
+    (key -> (value text, line, 0-based column)) and the production lines."""
+
+    constants: dict[str, float] = field(default_factory=dict)
+    headers: dict[str, tuple[str, int, int]] = field(default_factory=dict)
+    productions: list[tuple[int, str]] = field(default_factory=list)  # (line, text)
+
+
 def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> Grammar:
     """Parse grammar text. Defines are read first (in order), then settings
     and productions, so productions may use defines written below them."""
@@ -269,19 +284,54 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         line = text[: text.index("\x00")].count("\n") + 1
         raise GrammarError("NUL character in grammar", file, line, 1)
     lines = [_strip_comment(raw) for raw in text.splitlines()]
+    parts = _sort_lines(lines, file)
+    headers, constants = parts.headers, parts.constants
+    declared: tuple[str, ...] = ()
+    if "modules" in headers:
+        value, lineno, col = headers["modules"]
+        names = value.split()
+        for nm in names:
+            if not _NAME.fullmatch(nm):
+                raise _err_at(file, lineno)(f"module name {nm!r} must be a letter followed by "
+                                            "letters, digits or '_'", col + value.find(nm))
+        declared = tuple(sorted(set(names), key=len, reverse=True))
+    settings = _settings(headers, constants, declared, file)
+    if "axiom" not in headers:
+        raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
+    axiom = _axiom(*headers["axiom"], constants, declared, file)
+    productions = _parse_productions(parts.productions, constants, declared, file)
 
-    def err_at(lineno: int):
-        return lambda message, col: GrammarError(message, file, lineno, col + 1)
+    physics_keys = {field_name(k) for k in PHYSICS}
+    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
+    grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
+                    "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
+                    "description"}
+    kwargs = {k: v for k, v in settings.items() if k in grammar_keys}
+    if "width_scale" not in kwargs and "scale" in kwargs:
+        kwargs["width_scale"] = kwargs["scale"]
+    return Grammar(
+        name=settings.get("name") or name,
+        file=file,
+        source_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        axiom=axiom,
+        productions=productions,
+        physics=physics,
+        constants=tuple(sorted(constants.items())),
+        **kwargs,
+    )
 
-    constants: dict[str, float] = {}
-    headers: dict[str, tuple[str, int, int]] = {}  # key -> (value text, line, col)
-    production_lines: list[tuple[int, str]] = []
+
+def _sort_lines(lines: list[str], file: str) -> _FileParts:
+    """Evaluate the defines in order and set the settings and productions
+    aside, from comment-free lines (line 1 first)."""
+    parts = _FileParts()
+    constants, headers = parts.constants, parts.headers
     for lineno, line in enumerate(lines, start=1):
         stripped = line.strip()
         if not stripped:
             continue
         indent = len(line) - len(line.lstrip())
-        err = err_at(lineno)
+        err = _err_at(file, lineno)
         if stripped.startswith("#define"):
             rest = stripped[len("#define"):]
             m = re.match(r"\s+([A-Za-z_][A-Za-z_0-9]*)\s*(=\s*)?", rest)
@@ -297,7 +347,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         if stripped.startswith("#include"):
             raise err("#include is not supported; put everything in one file", indent)
         if _ARROW.search(line):
-            production_lines.append((lineno, line))
+            parts.productions.append((lineno, line))
             continue
         m = re.match(r"\s*([^:]+?)\s*:(.*)$", line)
         if not m:
@@ -314,20 +364,16 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         value = m.group(2)
         lead = len(value) - len(value.lstrip())
         headers[canonical] = (value.lstrip(), lineno, m.start(2) + lead)
+    return parts
 
+
+def _settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, float],
+              declared: tuple[str, ...], file: str) -> dict:
+    """Field name -> value of every setting but axiom and modules, checked
+    against its range (units: lsystem/settings.py)."""
     settings: dict = {}
-    declared: tuple[str, ...] = ()
-    if "modules" in headers:
-        value, lineno, col = headers["modules"]
-        names = value.split()
-        for nm in names:
-            if not _NAME.fullmatch(nm):
-                raise err_at(lineno)(f"module name {nm!r} must be a letter followed by letters,"
-                                     " digits or '_'", col + value.find(nm))
-        declared = tuple(sorted(set(names), key=len, reverse=True))
-
     for key, (value, lineno, col) in headers.items():
-        err = err_at(lineno)
+        err = _err_at(file, lineno)
         if key in ("name", "description"):
             settings[key] = value.strip()
         elif key in ("ignore", "consider"):
@@ -358,12 +404,14 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
             settings[key] = v
     if "ignore" in settings and "consider" in settings:
         _, lineno, col = headers["consider"]
-        raise err_at(lineno)("use either 'ignore' or 'consider', not both", col)
+        raise _err_at(file, lineno)("use either 'ignore' or 'consider', not both", col)
+    return settings
 
-    if "axiom" not in headers:
-        raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
-    value, lineno, col = headers["axiom"]
-    err = err_at(lineno)
+
+def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],
+           declared: tuple[str, ...], file: str) -> tuple[Module, ...]:
+    """The `axiom:` setting's modules, parameters evaluated."""
+    err = _err_at(file, lineno)
     raw = scan_modules(value, col, declared, err)
     if not raw:
         raise err("axiom is empty", col)
@@ -373,27 +421,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         params = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
                        for t, c in m.args)
         axiom.append((m.symbol, params))
-
-    productions = _parse_productions(production_lines, constants, declared, file)
-
-    physics_keys = {field_name(k) for k in PHYSICS}
-    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
-    grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
-                    "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
-                    "description"}
-    kwargs = {k: v for k, v in settings.items() if k in grammar_keys}
-    if "width_scale" not in kwargs and "scale" in kwargs:
-        kwargs["width_scale"] = kwargs["scale"]
-    return Grammar(
-        name=settings.get("name") or name,
-        file=file,
-        source_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
-        axiom=tuple(axiom),
-        productions=productions,
-        physics=physics,
-        constants=tuple(sorted(constants.items())),
-        **kwargs,
-    )
+    return tuple(axiom)
 
 
 def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, ...]:
