@@ -441,108 +441,138 @@ def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, 
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class _ProductionLine:
+    """One production line parsed. `key` (contexts, predecessor, condition
+    text) is shared by stochastic alternatives; prob None: not stochastic."""
+
+    key: tuple
+    left: tuple[Pattern, ...]
+    pred: Pattern
+    right: tuple[Pattern, ...]
+    condition: Expr | None
+    successor: tuple[SuccessorModule, ...]
+    prob: float | None
+    line: int
+
+
 def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float],
                        declared: tuple[str, ...], file: str) -> tuple[Production, ...]:
-    parsed = []  # (key, Production-ish pieces, prob or None, line)
-    for lineno, line in lines:
-        def err(message, col, _l=lineno):
-            return GrammarError(message, file, _l, col + 1)
-
-        m = _ARROW.search(line)
-        lhs, rhs, rhs_col = line[: m.start()], line[m.end():], m.end()
-        prob_text = m.group("prob")
-        prob = None
-        if prob_text is not None:
-            prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
-                                     col=m.start("prob"))
-        else:
-            colon = rfind_top(rhs, ":")
-            if colon >= 0:
-                prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
-                                         col=rhs_col + colon + 1)
-                rhs = rhs[:colon]
-        if prob is not None and not 0.0 <= prob <= 1.0:
-            raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
-
-        colon = find_top(lhs, ":")
-        cond_text, cond_col = None, 0
-        if colon >= 0:
-            cond_text, cond_col = lhs[colon + 1:], colon + 1
-            lhs = lhs[:colon]
-        if not lhs.strip():
-            raise err("production has no predecessor", 0)
-        lt = find_top(lhs, "<")
-        gt = find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
-        if lt >= 0 and find_top(lhs, "<", lt + 1) >= 0:
-            raise err("more than one '<' in predecessor", find_top(lhs, "<", lt + 1))
-        if gt >= 0 and find_top(lhs, ">", gt + 1) >= 0:
-            raise err("more than one '>' in predecessor", find_top(lhs, ">", gt + 1))
-        pred_start = lt + 1 if lt >= 0 else 0
-        pred_end = gt if gt >= 0 else len(lhs)
-        left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
-        right = _patterns(lhs[gt + 1:], gt + 1, declared, err, "context") if gt >= 0 else ()
-        pred = _patterns(lhs[pred_start:pred_end], pred_start, declared, err, "predecessor")
-        if len(pred) != 1:
-            raise err("the strict predecessor must be exactly one module"
-                      f" (found {len(pred)})", pred_start)
-        for ctx, where in ((left, "left"), (right, "right")):
-            if any(p.symbol in "[]" for p in ctx):
-                raise err(f"brackets in the {where} context are not supported", 0)
-
-        names: dict[str, int] = {}
-        for p in (*left, pred[0], *right):
-            for nm in p.params:
-                if nm in names:
-                    raise err(f"parameter {nm!r} is bound twice in the predecessor", 0)
-                names[nm] = len(names)
-
-        condition = None
-        if cond_text is not None:
-            if not cond_text.strip():
-                raise err("empty condition after ':'", cond_col)
-            condition = compile_expr(cond_text, names, constants, file=file, line=lineno,
-                                     col=cond_col)
-
-        mods = scan_modules(rhs, rhs_col, declared, err)
-        if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
-            mods = []
-        _check_brackets(mods, err)
-        successor = tuple(
-            SuccessorModule(mod.symbol, tuple(
-                compile_expr(t, names, constants, file=file, line=lineno, col=c)
-                for t, c in mod.args))
-            for mod in mods
-        )
-        key = (left, pred[0], right, cond_text.strip() if cond_text else None)
-        parsed.append((key, left, pred[0], right, condition, successor, prob, lineno))
+    """The productions of the production lines (line number, text), in file
+    order; stochastic alternatives become one production, probabilities
+    normalised to sum to 1."""
+    parsed = [_parse_production_line(lineno, line, constants, declared, file)
+              for lineno, line in lines]
 
     # Group stochastic alternatives (same predecessor, contexts and condition).
     productions: list[Production] = []
-    groups: dict[tuple, list] = {}
+    groups: dict[tuple, list[_ProductionLine]] = {}
     order: list[tuple] = []
     for item in parsed:
-        key, prob = item[0], item[6]
-        if prob is None:
+        if item.prob is None:
             order.append(("single", len(order), item))
         else:
-            if key not in groups:
-                groups[key] = []
-                order.append(("group", key, None))
-            groups[key].append(item)
+            if item.key not in groups:
+                groups[item.key] = []
+                order.append(("group", item.key, None))
+            groups[item.key].append(item)
     for kind, key, item in order:
         if kind == "single":
-            _, left, pred, right, cond, succ, _, lineno = item
-            productions.append(Production(left, pred, right, cond, (succ,), (1.0,), file, lineno))
+            productions.append(Production(item.left, item.pred, item.right, item.condition,
+                                          (item.successor,), (1.0,), file, item.line))
             continue
         items = groups[key]
-        total = sum(it[6] for it in items)
+        total = sum(it.prob for it in items)
         if abs(total - 1.0) > 1e-3:
-            lines_txt = ", ".join(str(it[7]) for it in items)
+            lines_txt = ", ".join(str(it.line) for it in items)
             raise GrammarError(
                 f"probabilities for {key[1].symbol!r} (lines {lines_txt}) sum to {total:g};"
-                " they must sum to 1", file, items[0][7], 1)
-        _, left, pred, right, cond, _, _, lineno = items[0]
+                " they must sum to 1", file, items[0].line, 1)
+        first = items[0]
         productions.append(Production(
-            left, pred, right, cond, tuple(it[5] for it in items),
-            tuple(it[6] / total for it in items), file, lineno))
+            first.left, first.pred, first.right, first.condition,
+            tuple(it.successor for it in items), tuple(it.prob / total for it in items), file,
+            first.line))
     return tuple(productions)
+
+
+def _parse_production_line(lineno: int, line: str, constants: dict[str, float],
+                           declared: tuple[str, ...], file: str) -> _ProductionLine:
+    """`left < pred > right : condition -> successor`, with an optional
+    probability in [0, 1] (`-(p)->`, or `: p` after the successor)."""
+    err = _err_at(file, lineno)
+    m = _ARROW.search(line)
+    lhs, rhs, rhs_col = line[: m.start()], line[m.end():], m.end()
+    prob_text = m.group("prob")
+    prob = None
+    if prob_text is not None:
+        prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
+                                 col=m.start("prob"))
+    else:
+        colon = rfind_top(rhs, ":")
+        if colon >= 0:
+            prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
+                                     col=rhs_col + colon + 1)
+            rhs = rhs[:colon]
+    if prob is not None and not 0.0 <= prob <= 1.0:
+        raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
+
+    colon = find_top(lhs, ":")
+    cond_text, cond_col = None, 0
+    if colon >= 0:
+        cond_text, cond_col = lhs[colon + 1:], colon + 1
+        lhs = lhs[:colon]
+    left, pred, right = _predecessor(lhs, declared, err)
+
+    names: dict[str, int] = {}
+    for p in (*left, pred, *right):
+        for nm in p.params:
+            if nm in names:
+                raise err(f"parameter {nm!r} is bound twice in the predecessor", 0)
+            names[nm] = len(names)
+
+    condition = None
+    if cond_text is not None:
+        if not cond_text.strip():
+            raise err("empty condition after ':'", cond_col)
+        condition = compile_expr(cond_text, names, constants, file=file, line=lineno,
+                                 col=cond_col)
+
+    mods = scan_modules(rhs, rhs_col, declared, err)
+    if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
+        mods = []
+    _check_brackets(mods, err)
+    successor = tuple(
+        SuccessorModule(mod.symbol, tuple(
+            compile_expr(t, names, constants, file=file, line=lineno, col=c)
+            for t, c in mod.args))
+        for mod in mods
+    )
+    key = (left, pred, right, cond_text.strip() if cond_text else None)
+    return _ProductionLine(key, left, pred, right, condition, successor, prob, lineno)
+
+
+def _predecessor(lhs: str, declared: tuple[str, ...],
+                 err) -> tuple[tuple[Pattern, ...], Pattern, tuple[Pattern, ...]]:
+    """`left < pred > right` (contexts optional, without brackets) -> the
+    left context, the strict predecessor (one module) and the right context."""
+    if not lhs.strip():
+        raise err("production has no predecessor", 0)
+    lt = find_top(lhs, "<")
+    gt = find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
+    if lt >= 0 and find_top(lhs, "<", lt + 1) >= 0:
+        raise err("more than one '<' in predecessor", find_top(lhs, "<", lt + 1))
+    if gt >= 0 and find_top(lhs, ">", gt + 1) >= 0:
+        raise err("more than one '>' in predecessor", find_top(lhs, ">", gt + 1))
+    pred_start = lt + 1 if lt >= 0 else 0
+    pred_end = gt if gt >= 0 else len(lhs)
+    left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
+    right = _patterns(lhs[gt + 1:], gt + 1, declared, err, "context") if gt >= 0 else ()
+    pred = _patterns(lhs[pred_start:pred_end], pred_start, declared, err, "predecessor")
+    if len(pred) != 1:
+        raise err("the strict predecessor must be exactly one module"
+                  f" (found {len(pred)})", pred_start)
+    for ctx, where in ((left, "left"), (right, "right")):
+        if any(p.symbol in "[]" for p in ctx):
+            raise err(f"brackets in the {where} context are not supported", 0)
+    return left, pred[0], right
