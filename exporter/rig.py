@@ -179,9 +179,9 @@ def _group_segments(model: TreeModel, opts: RigOptions,
 
 @dataclass
 class _BoneSums:
-    """Per bone (B,): mass kg, centre of mass (B, 3) m, inertia (B, 3, 3)
-    kg m^2 about it, mean radius m, wood area m^2 (diameter x length), leaf
-    area m^2 and bending compliance rad/(N m), summed over its segments."""
+    """Per bone (B,), from its segments: mass kg, centre of mass (B, 3) m,
+    inertia (B, 3, 3) kg m^2 about it, volume-weighted mean radius m, wood
+    area m^2 (diameter x length), leaf area m^2, bending compliance rad/(N m)."""
 
     mass: np.ndarray
     com: np.ndarray
@@ -289,8 +289,8 @@ def _bone_sums(model: TreeModel, opts: RigOptions, seg_bone: np.ndarray,
 
 def _joint_stiffness(bone_parent: np.ndarray, bone_limb: list[int],
                      bone_c: np.ndarray) -> np.ndarray:
-    """(B,) N m/rad at each bone's base from the bones' compliances bone_c
-    (rad/(N m)): half of its own, plus half of its parent's on the same limb."""
+    """(B,) N m/rad, the joint at each bone's base: 1 / (half the bone's
+    compliance + half its parent's on the same limb), bone_c in rad/(N m)."""
     n = len(bone_parent)
     k = np.empty(n)
     for b in range(n):
