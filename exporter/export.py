@@ -159,6 +159,23 @@ def _textures(meshes: list[TreeMesh], opts: ExportOptions) -> dict:
     return {n: texture_for(n) for n in names}
 
 
+@dataclass(frozen=True)
+class _Job:
+    """What the format writers share: the bake and its meshes, the output
+    folder and job name, the options, the first frame's number, material ->
+    texture (None: plain colour), material -> texture file, and progress."""
+
+    bake: Bake
+    meshes: list[TreeMesh]
+    folder: Path
+    name: str
+    opts: ExportOptions
+    first: int
+    textures: dict
+    maps: dict
+    tick: Progress
+
+
 def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
                 opts: ExportOptions | None = None, bake_path: str | Path | None = None,
                 progress: Progress | None = None) -> ExportReport:
@@ -177,7 +194,6 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     bake_path = Path(bake_path) if bake_path is not None else None
     tick = progress or (lambda stage, done, total: None)
     meshes, broken = build_meshes(bake, opts.mesh)
-    files: list[Path] = []
     manifest: dict = {"tool": f"treebake {__version__}", "job": name,
                       "inputs": _inputs(bake, bake_path), "settings": _settings(opts)}
     n = len(bake.times)
@@ -197,48 +213,11 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
     textures = _textures(meshes, opts)
     maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
-    # PNGs beside the files that reference them (obj/textures/, textures/): a
-    # reader need not follow paths out of its file's folder (trimesh refuses)
-    pngs = {t.name: t.png for t in textures.values() if t is not None}
-    for sub, fmts in (("obj", ("obj",)), ("", ("usd", "usda"))):
-        if any(f in opts.formats for f in fmts):
-            files += [write_bytes(folder / sub / "textures" / n, png) for n, png in pngs.items()]
-    for fmt in ("glb", "gltf"):
-        if fmt in opts.formats:
-            from .exchange.gltf import export_gltf
-
-            tick(fmt, 0, 1)
-            res = export_gltf(bake, meshes, folder, name, binary=fmt == "glb", split=opts.split,
-                              opts=opts.reduce, frame_start=first, textures=textures)
-            files += res.files
-            manifest["animation"] = _rounded(res.animation)
-            manifest["animation"]["tolerances"] = {
-                "position_m": opts.reduce.position_tolerance,
-                "angle_deg": round(math.degrees(opts.reduce.angle_tolerance), 9)}
-            tick(fmt, 1, 1)
-    if "obj" in opts.formats:
-        from .exchange.obj import export_obj
-
-        res = export_obj(bake, meshes, folder / "obj", name, opts.obj_stride,
-                         progress=lambda d, t: tick("obj", d, t), frame_start=first,
-                         maps=maps)
-        files += res.files
-        manifest["frames"]["obj"] = {"stride": opts.obj_stride, "files": len(res.frames),
-                                     "first": res.frames[0] + first,
-                                     "last": res.frames[-1] + first}
-    for fmt in ("usd", "usda"):
-        if fmt in opts.formats:
-            from .exchange.usd import export_usd
-
-            res = export_usd(bake, meshes, folder, name, ascii=fmt == "usda",
-                             progress=lambda d, t, f=fmt: tick(f, d, t), frame_start=first,
-                             maps=maps)
-            if res.validation_errors:
-                raise TreebakeError("USD validation failed:\n  " +
-                                    "\n  ".join(res.validation_errors[:20]))
-            files += res.files
-            manifest["usd"] = {"time_codes": list(res.time_codes), "joints": res.joints,
-                               "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0}
+    job = _Job(bake, meshes, folder, name, opts, first, textures, maps, tick)
+    files = _write_texture_pngs(job)
+    files += _write_gltf(job, manifest)
+    files += _write_obj(job, manifest)
+    files += _write_usd(job, manifest)
     if "preview" in opts.formats:
         files += write_previews(bake, folder, name, opts.preview_size,
                                 progress=lambda d, t: tick("preview", d, t))
@@ -249,6 +228,73 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     manifest["total_bytes"] = sum(e["bytes"] for e in manifest["files"])
     man = write_text(folder / "manifest.json", json.dumps(manifest, indent=2) + "\n")
     return ExportReport(folder, manifest, [*files, man])
+
+
+def _write_texture_pngs(job: _Job) -> list[Path]:
+    """The texture PNGs the OBJ and USD files reference."""
+    # PNGs beside the files that reference them (obj/textures/, textures/): a
+    # reader need not follow paths out of its file's folder (trimesh refuses)
+    pngs = {t.name: t.png for t in job.textures.values() if t is not None}
+    files: list[Path] = []
+    for sub, fmts in (("obj", ("obj",)), ("", ("usd", "usda"))):
+        if any(f in job.opts.formats for f in fmts):
+            files += [write_bytes(job.folder / sub / "textures" / n, png)
+                      for n, png in pngs.items()]
+    return files
+
+
+def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
+    """.glb and .gltf files; their keyframe reduction goes into the manifest."""
+    opts, files = job.opts, []
+    for fmt in ("glb", "gltf"):
+        if fmt in opts.formats:
+            from .exchange.gltf import export_gltf
+
+            job.tick(fmt, 0, 1)
+            res = export_gltf(job.bake, job.meshes, job.folder, job.name, binary=fmt == "glb",
+                              split=opts.split, opts=opts.reduce, frame_start=job.first,
+                              textures=job.textures)
+            files += res.files
+            manifest["animation"] = _rounded(res.animation)
+            manifest["animation"]["tolerances"] = {
+                "position_m": opts.reduce.position_tolerance,
+                "angle_deg": round(math.degrees(opts.reduce.angle_tolerance), 9)}
+            job.tick(fmt, 1, 1)
+    return files
+
+
+def _write_obj(job: _Job, manifest: dict) -> list[Path]:
+    """The OBJ sequence in obj/; its frame numbers go into the manifest."""
+    if "obj" not in job.opts.formats:
+        return []
+    from .exchange.obj import export_obj
+
+    res = export_obj(job.bake, job.meshes, job.folder / "obj", job.name, job.opts.obj_stride,
+                     progress=lambda d, t: job.tick("obj", d, t), frame_start=job.first,
+                     maps=job.maps)
+    manifest["frames"]["obj"] = {"stride": job.opts.obj_stride, "files": len(res.frames),
+                                 "first": res.frames[0] + job.first,
+                                 "last": res.frames[-1] + job.first}
+    return res.files
+
+
+def _write_usd(job: _Job, manifest: dict) -> list[Path]:
+    """.usd and .usda files, validated; their time codes go into the manifest."""
+    files = []
+    for fmt in ("usd", "usda"):
+        if fmt in job.opts.formats:
+            from .exchange.usd import export_usd
+
+            res = export_usd(job.bake, job.meshes, job.folder, job.name, ascii=fmt == "usda",
+                             progress=lambda d, t, f=fmt: job.tick(f, d, t),
+                             frame_start=job.first, maps=job.maps)
+            if res.validation_errors:
+                raise TreebakeError("USD validation failed:\n  " +
+                                    "\n  ".join(res.validation_errors[:20]))
+            files += res.files
+            manifest["usd"] = {"time_codes": list(res.time_codes), "joints": res.joints,
+                               "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0}
+    return files
 
 
 def write_previews(bake: Bake, folder: Path, name: str, size: int = 256,

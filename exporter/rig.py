@@ -113,10 +113,6 @@ class Rig:
         n = np.linalg.norm(v, axis=1, keepdims=True)
         return np.divide(v, n, out=np.tile([0.0, 0.0, 1.0], (len(v), 1)), where=n > 0)
 
-    @property
-    def is_root(self) -> np.ndarray:
-        return self.bone_parent < 0
-
     def main_stem(self) -> np.ndarray:
         """Bones of the main stem (TreeModel.main_stem), ground up."""
         return np.unique(self.seg_bone[self.model.main_stem()])
@@ -181,18 +177,24 @@ def _group_segments(model: TreeModel, opts: RigOptions,
     return groups
 
 
+@dataclass
+class _BoneSums:
+    """Per bone (B,), from its segments: mass kg, centre of mass (B, 3) m,
+    inertia (B, 3, 3) kg m^2 about it, volume-weighted mean radius m, wood
+    area m^2 (diameter x length), leaf area m^2, bending compliance rad/(N m)."""
+
+    mass: np.ndarray
+    com: np.ndarray
+    inertia: np.ndarray
+    radius: np.ndarray
+    wood_area: np.ndarray
+    leaf_area: np.ndarray
+    compliance: np.ndarray
+
+
 def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
     """Rig a TreeModel. Bones are ordered so that a parent precedes its children."""
     opts = options or RigOptions()
-    seg_len = model.seg_length
-    width = np.maximum(model.width, opts.min_width)
-    area = np.pi / 4 * width**2
-    seg_wood = model.density * area * seg_len
-    leaf_area_seg = np.where(model.leaf > 0, 2.0 * model.leaf_size**2, 0.0)
-    seg_mass = seg_wood + model.leaf_mass * leaf_area_seg
-    ei = np.where(np.isnan(model.ei), model.modulus * np.pi * width**4 / 64, model.ei)
-    compliance = seg_len / ei  # rad per N m
-
     chains = physics_chains(model)
     groups = _group_segments(model, opts, chains)
     seg_bone = np.full(model.n_segments, -1, dtype=np.int64)
@@ -207,6 +209,54 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
             bone_segs.append(segs)
             bone_limb.append(li)
     n = len(bone_segs)
+    first = np.array([segs[0] for segs in bone_segs], dtype=np.int64)
+    last = np.array([segs[-1] for segs in bone_segs], dtype=np.int64)
+    ps = model.seg_parent[first]
+    bone_parent = np.where(ps >= 0, seg_bone[np.maximum(ps, 0)], -1)
+    pivot = model.points[model.seg_start[first]]
+    tip = model.points[model.seg_end[last]]
+    sums = _bone_sums(model, opts, seg_bone, bone_segs)
+
+    limbs = []
+    for chain, bones in zip(chains, groups):
+        ids = [int(seg_bone[segs[0]]) for segs in bones]
+        limbs.append(RigLimb(int(bone_parent[ids[0]]), ids, model.limbs[chain[0]].path))
+
+    first_seg = np.array([segs[0] for segs in bone_segs])
+    k = _joint_stiffness(bone_parent, bone_limb, sums.compliance)
+    override = model.stiffness[first_seg]
+    k = np.where(np.isnan(override), k, override)
+
+    strength = model.strength[first_seg].copy()
+    roots = bone_parent < 0
+    strength[roots] = np.minimum(strength[roots], model.anchor)
+    cone = model.cone[first_seg].copy()
+
+    zeta = model.damping[first_seg]
+    rig = Rig(model.name, model, opts, seg_bone, np.asarray(bone_limb, dtype=np.int64),
+              bone_parent, pivot, tip, sums.mass, sums.com, sums.inertia, sums.radius,
+              sums.wood_area, sums.leaf_area, k, zeta, np.zeros(n), cone, strength, limbs,
+              np.zeros(len(limbs)), 0.0, model.drag, model.leaf_drag)
+    rig.limb_omega = limb_frequencies(rig)
+    roots = [li for li, limb in enumerate(limbs) if limb.parent_bone < 0]
+    rig.first_frequency = float(rig.limb_omega[roots].min()) / (2 * math.pi)
+    rig.alpha = 2.0 * zeta * rig.limb_omega[rig.bone_limb]
+    return rig
+
+
+def _bone_sums(model: TreeModel, opts: RigOptions, seg_bone: np.ndarray,
+               bone_segs: list[list[int]]) -> _BoneSums:
+    """Mass, inertia, sizes and compliance of each bone from its segments:
+    solid cylinders of green wood plus leaf cards (see the module doc)."""
+    seg_len = model.seg_length
+    width = np.maximum(model.width, opts.min_width)
+    area = np.pi / 4 * width**2
+    seg_wood = model.density * area * seg_len
+    leaf_area_seg = np.where(model.leaf > 0, 2.0 * model.leaf_size**2, 0.0)
+    seg_mass = seg_wood + model.leaf_mass * leaf_area_seg
+    ei = np.where(np.isnan(model.ei), model.modulus * np.pi * width**4 / 64, model.ei)
+    compliance = seg_len / ei  # rad per N m
+    n = len(bone_segs)
     pts = model.points
     # per-segment quantities summed into bones (segments of a bone follow each other)
     order = np.fromiter((s for segs in bone_segs for s in segs), dtype=np.int64,
@@ -218,12 +268,6 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
         return np.stack([np.bincount(of, flat[:, k], minlength=n)
                          for k in range(flat.shape[1])], 1).reshape((n,) + values.shape[1:])
 
-    first = np.array([segs[0] for segs in bone_segs], dtype=np.int64)
-    last = np.array([segs[-1] for segs in bone_segs], dtype=np.int64)
-    ps = model.seg_parent[first]
-    bone_parent = np.where(ps >= 0, seg_bone[np.maximum(ps, 0)], -1)
-    pivot = pts[model.seg_start[first]]
-    tip = pts[model.seg_end[last]]
     m = seg_mass[order]
     start, end = pts[model.seg_start[order]], pts[model.seg_end[order]]
     mids = 0.5 * (start + end)
@@ -239,38 +283,22 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
                       per_bone(width[order] / 2) / count)
     wood_area = per_bone(width[order] * seg_len[order])
     leaf_area = per_bone(leaf_area_seg[order])
-    bone_c = per_bone(compliance[order])
+    return _BoneSums(mass, com, inertia, radius, wood_area, leaf_area,
+                     per_bone(compliance[order]))
 
-    limbs = []
-    for chain, bones in zip(chains, groups):
-        ids = [int(seg_bone[segs[0]]) for segs in bones]
-        limbs.append(RigLimb(int(bone_parent[ids[0]]), ids, model.limbs[chain[0]].path))
 
-    first_seg = np.array([segs[0] for segs in bone_segs])
+def _joint_stiffness(bone_parent: np.ndarray, bone_limb: list[int],
+                     bone_c: np.ndarray) -> np.ndarray:
+    """(B,) N m/rad, the joint at each bone's base: 1 / (half the bone's
+    compliance + half its parent's on the same limb), bone_c in rad/(N m)."""
+    n = len(bone_parent)
     k = np.empty(n)
     for b in range(n):
         p = bone_parent[b]
         same_limb = p >= 0 and bone_limb[p] == bone_limb[b]
         c_half = bone_c[b] / 2 + (bone_c[p] / 2 if same_limb else 0.0)
         k[b] = 1.0 / c_half if c_half > 0 else 1e12
-    override = model.stiffness[first_seg]
-    k = np.where(np.isnan(override), k, override)
-
-    strength = model.strength[first_seg].copy()
-    roots = bone_parent < 0
-    strength[roots] = np.minimum(strength[roots], model.anchor)
-    cone = model.cone[first_seg].copy()
-
-    zeta = model.damping[first_seg]
-    rig = Rig(model.name, model, opts, seg_bone, np.asarray(bone_limb, dtype=np.int64),
-              bone_parent, pivot, tip, mass, com, inertia, radius, wood_area, leaf_area, k,
-              zeta, np.zeros(n), cone, strength, limbs, np.zeros(len(limbs)), 0.0, model.drag,
-              model.leaf_drag)
-    rig.limb_omega = limb_frequencies(rig)
-    roots = [li for li, limb in enumerate(limbs) if limb.parent_bone < 0]
-    rig.first_frequency = float(rig.limb_omega[roots].min()) / (2 * math.pi)
-    rig.alpha = 2.0 * zeta * rig.limb_omega[rig.bone_limb]
-    return rig
+    return k
 
 
 def _cylinders_inertia(m, mids, vecs, radii, com) -> np.ndarray:

@@ -74,15 +74,6 @@ def turn_rows(r: np.ndarray, v: np.ndarray) -> np.ndarray:
     return r[:, 0] * v[0] + r[:, 1] * v[1] + r[:, 2] * v[2]
 
 
-def compose_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a b for matrices as rows (3, 3, ...)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
-    return out
-
-
 def qmul_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a b for quaternions as rows (4, ...), x y z w."""
     ax, ay, az, aw = a

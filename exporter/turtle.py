@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -110,67 +110,39 @@ class _State:
     elasticity: float
 
 
+@dataclass
+class _Drawing:
+    """What the turtle drew: points (m), limbs, segment rows and each limb's
+    number of child limbs (key -1: root limbs)."""
+
+    points: list[tuple[float, float, float]]
+    limbs: list[Limb] = field(default_factory=list)
+    # per segment: (start, end, limb, parent_seg, width, *phys, leaf, leaf_size)
+    seg_rows: list[tuple] = field(default_factory=list)
+    children: dict[int, int] = field(default_factory=dict)
+
+
 def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = None,
               seed: int | None = None) -> TreeModel:
     """Walk the module string and build the TreeModel (metres, Z up)."""
     g = grammar
     ph = g.physics
-    scale, wscale = g.scale, g.width_scale
-    default_angle = math.radians(g.angle)
-    st = _State((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), g.width * wscale, -1, -1, -1, True,
+    st = _State((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), g.width * g.width_scale, -1, -1, 0, True,
                 (ph.density, ph.modulus, math.nan, math.nan, ph.damping, ph.cone,
                  ph.strength, ph.rupture),
                 g.leaves, ph.leaf_size, g.tropism, g.elasticity)
     stack: list[_State] = []
-    points: list[tuple[float, float, float]] = [st.pos]
-    st.point = 0
-    limbs: list[Limb] = []
-    seg_rows: list[tuple] = []  # (start, end, limb, parent_seg, width, *phys, leaf, leaf_size)
-    children: dict[int, int] = {}
+    drawing = _Drawing([st.pos])  # point 0: the turtle's start
 
     def fail(message: str) -> GrammarError:
         return GrammarError(message, g.file, 0, 0)
 
     for sym, params in modules:
         if sym == "F":
-            length = (params[0] if params else g.step) * scale
+            length = (params[0] if params else g.step) * g.scale
             if length == 0.0:
                 continue
-            h = qrotate(st.q, _H)
-            if st.point < 0:  # moved without drawing: a new point off the limb
-                points.append(st.pos)
-                st.point = len(points) - 1
-                st.new_limb = True
-            if st.new_limb:
-                parent = st.limb
-                attach = st.index if parent >= 0 else -1
-                limbs.append(Limb(parent, attach, [st.point]))
-                children[parent] = children.get(parent, 0) + 1
-                if parent < 0:
-                    roots = children[-1]
-                    limbs[-1].path = "trunk" if roots == 1 else f"trunk{roots}"
-                else:
-                    limbs[-1].path = f"{limbs[parent].path}/{children[parent]}"
-                st.limb, st.index, st.new_limb = len(limbs) - 1, 0, False
-            limb = limbs[st.limb]
-            new = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
-                   st.pos[2] + h[2] * length)
-            points.append(new)
-            if limb.segments:
-                parent_seg = limb.segments[-1]
-            else:
-                parent_seg = _segment_ending_at(limbs, limb)
-            seg_rows.append((st.point, len(points) - 1, st.limb, parent_seg, st.width,
-                             *st.phys, st.leaf, st.leaf_size))
-            limb.segments.append(len(seg_rows) - 1)
-            limb.points.append(len(points) - 1)
-            st.pos, st.point, st.index = new, len(points) - 1, len(limb.points) - 1
-            if st.elasticity != 0.0:
-                st.q = _tropism(st.q, h, st.tropism, st.elasticity)
-        elif sym in _TURNS:
-            axis, sign = _TURNS[sym]
-            angle = math.radians(params[0]) if params else default_angle
-            st.q = qmul(st.q, qaxis(*axis, sign * angle))
+            _draw_segment(st, length, drawing)
         elif sym == "[":
             stack.append(st)
             st = _State(**st.__dict__)
@@ -179,41 +151,105 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
             if not stack:
                 raise fail("']' without a matching '[' in the derived string")
             st = stack.pop()
-        elif sym == "f":
-            length = (params[0] if params else g.step) * scale
-            h = qrotate(st.q, _H)
-            st.pos = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
-                      st.pos[2] + h[2] * length)
-            st.point = -1
-        elif sym == "!" or sym == "@width":
-            st.width = params[0] * wscale if params else st.width * g.width_factor
-            if st.width < 0:
-                raise fail(f"negative width {st.width:g} m")
-        elif sym == "|":
-            st.q = qmul(st.q, qaxis(*_U, math.pi))
-        elif sym == "$" or sym == "@roll":
-            st.q = _roll_horizontal(st.q)
-        elif sym in _PHYS:
-            st.phys = _set_phys(st.phys, _PHYS[sym], params[0], fail)
-        elif sym == "@leaves":
-            st.leaf = int(params[0])
-            if st.leaf < 0:
-                raise fail(f"leaf type must be >= 0, got {params[0]:g}")
-            if len(params) > 1:
-                st.leaf_size = params[1]
-        elif sym == "@tropism":
-            if len(params) == 4:
-                t = params[:3]
-                if math.hypot(*t) == 0:
-                    raise fail("@tropism vector must not be zero")
-                st.tropism = (t[0], t[1], t[2])
-            st.elasticity = params[-1]
+        else:
+            _apply_command(st, sym, params, g, fail)
         if len(stack) > 100_000:
             raise fail("bracket nesting deeper than 100000")
+    return _tree_model(drawing, g, name, seed, fail)
 
+
+def _draw_segment(st: _State, length: float, drawing: _Drawing) -> None:
+    """F: a segment `length` m along the heading, on the turtle's limb or a new
+    one; the turtle moves to its end and, with tropism, bends."""
+    points, limbs = drawing.points, drawing.limbs
+    h = qrotate(st.q, _H)
+    if st.point < 0:  # moved without drawing: a new point off the limb
+        points.append(st.pos)
+        st.point = len(points) - 1
+        st.new_limb = True
+    if st.new_limb:
+        _start_limb(st, drawing)
+    limb = limbs[st.limb]
+    new = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
+           st.pos[2] + h[2] * length)
+    points.append(new)
+    if limb.segments:
+        parent_seg = limb.segments[-1]
+    else:
+        parent_seg = _segment_ending_at(limbs, limb)
+    drawing.seg_rows.append((st.point, len(points) - 1, st.limb, parent_seg, st.width,
+                             *st.phys, st.leaf, st.leaf_size))
+    limb.segments.append(len(drawing.seg_rows) - 1)
+    limb.points.append(len(points) - 1)
+    st.pos, st.point, st.index = new, len(points) - 1, len(limb.points) - 1
+    if st.elasticity != 0.0:
+        st.q = _tropism(st.q, h, st.tropism, st.elasticity)
+
+
+def _start_limb(st: _State, drawing: _Drawing) -> None:
+    """A new limb from the turtle's point, the child of the limb it is on
+    (none: a root limb, `trunk`, `trunk2`, ...); the turtle moves onto it."""
+    limbs, children = drawing.limbs, drawing.children
+    parent = st.limb
+    attach = st.index if parent >= 0 else -1
+    limbs.append(Limb(parent, attach, [st.point]))
+    children[parent] = children.get(parent, 0) + 1
+    if parent < 0:
+        roots = children[-1]
+        limbs[-1].path = "trunk" if roots == 1 else f"trunk{roots}"
+    else:
+        limbs[-1].path = f"{limbs[parent].path}/{children[parent]}"
+    st.limb, st.index, st.new_limb = len(limbs) - 1, 0, False
+
+
+def _apply_command(st: _State, sym: str, params: tuple[float, ...], g: Grammar, fail) -> None:
+    """Every command but F, [ and ]: turns (degrees), f (moves without
+    drawing), width (m), physics, leaves and tropism, applied to `st` in
+    place. Other symbols are ignored; `fail(message)` builds the error."""
+    if sym in _TURNS:
+        axis, sign = _TURNS[sym]
+        angle = math.radians(params[0]) if params else math.radians(g.angle)
+        st.q = qmul(st.q, qaxis(*axis, sign * angle))
+    elif sym == "f":
+        length = (params[0] if params else g.step) * g.scale
+        h = qrotate(st.q, _H)
+        st.pos = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
+                  st.pos[2] + h[2] * length)
+        st.point = -1
+    elif sym == "!" or sym == "@width":
+        st.width = params[0] * g.width_scale if params else st.width * g.width_factor
+        if st.width < 0:
+            raise fail(f"negative width {st.width:g} m")
+    elif sym == "|":
+        st.q = qmul(st.q, qaxis(*_U, math.pi))
+    elif sym == "$" or sym == "@roll":
+        st.q = _roll_horizontal(st.q)
+    elif sym in _PHYS:
+        st.phys = _set_phys(st.phys, _PHYS[sym], params[0], fail)
+    elif sym == "@leaves":
+        st.leaf = int(params[0])
+        if st.leaf < 0:
+            raise fail(f"leaf type must be >= 0, got {params[0]:g}")
+        if len(params) > 1:
+            st.leaf_size = params[1]
+    elif sym == "@tropism":
+        if len(params) == 4:
+            t = params[:3]
+            if math.hypot(*t) == 0:
+                raise fail("@tropism vector must not be zero")
+            st.tropism = (t[0], t[1], t[2])
+        st.elasticity = params[-1]
+
+
+def _tree_model(drawing: _Drawing, g: Grammar, name: str | None, seed: int | None,
+                fail) -> TreeModel:
+    """The TreeModel of what the turtle drew: per-segment arrays (SI units;
+    cone in radians, strength in N m capped by the rupture modulus)."""
+    seg_rows = drawing.seg_rows
+    ph = g.physics
     if not seg_rows:
         raise fail("the derived string draws no segments (no F with non-zero length)")
-    pts = np.asarray(points, dtype=float)
+    pts = np.asarray(drawing.points, dtype=float)
     if not np.isfinite(pts).all():
         raise fail("the geometry is not finite (a length or angle parameter is too large)")
     cols = list(zip(*seg_rows))
@@ -244,7 +280,7 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
         strength=strength,
         leaf=np.asarray(cols[13], dtype=np.int64),
         leaf_size=np.asarray(cols[14], dtype=float),
-        limbs=limbs,
+        limbs=drawing.limbs,
         anchor=ph.anchor,
         leaf_mass=ph.leaf_mass,
         drag=ph.drag,

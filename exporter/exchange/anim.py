@@ -240,12 +240,6 @@ def subtree_reach(parent: np.ndarray, base: np.ndarray, tips: np.ndarray) -> np.
     return reach
 
 
-def _constant_masks(t_loc, q_loc, tol_t, tol_q):
-    tv = np.swapaxes(t_loc, 0, 1)
-    qv = np.swapaxes(q_loc, 0, 1)
-    return _constant(tv, tol_t, False), _constant(qv, tol_q, True)
-
-
 def _subtree(parent: np.ndarray, rows: np.ndarray):
     """The joints `rows` (whole trees, sorted) with parents renumbered."""
     new = np.full(len(parent), -1, dtype=np.int64)
@@ -323,21 +317,8 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
         tol_q = np.where(red, sc * np.minimum(opts.angle_tolerance, lever[rows]), 0.0)
         const_t[rows] = _constant(tv[rows], np.maximum(tol_t, const_position[rows]), False)
         const_q[rows] = _constant(qv[rows], np.maximum(tol_q, CONSTANT_ANGLE), True)
-        for keep, vals, const, tol, is_rot in ((keep_t, tv, const_t, tol_t, False),
-                                               (keep_q, qv, const_q, tol_q, True)):
-            k = np.zeros((len(rows), F), bool)
-            c = const[rows]
-            k[c, 0] = True
-            k[~c & ~red] = True
-            sel = ~c & red
-            if sel.any():
-                k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot, times)
-                # a reduced channel needs its own key times (4 bytes a key); when
-                # that costs more than it saves, keep every frame (shared times)
-                width = vals.shape[2] * 4
-                dense = sel & (k.sum(axis=1) * (width + 4) >= F * width)
-                k[dense] = True
-            keep[rows] = k
+        keep_t[rows] = _kept_samples(tv, rows, const_t[rows], red, tol_t, False, times)
+        keep_q[rows] = _kept_samples(qv, rows, const_q[rows], red, tol_q, True, times)
         for chunk in _chunks(rows, group):
             e_pos[chunk], e_ang[chunk] = _world_error(
                 _subtree(parent, chunk), t_loc[:, chunk], q_loc[:, chunk], keep_t[chunk],
@@ -353,15 +334,7 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
         if attempt >= MAX_HALVINGS:
             reduce[failing] = False  # give up reducing these trees: keep every frame
         rows = np.flatnonzero(failing[group])
-    channels = []
-    for j in range(J):
-        if not const_t[j]:
-            fr = np.flatnonzero(keep_t[j])
-            channels.append(Channel(j, "translation", fr, t_loc[fr, j].astype(np.float32)))
-        if not const_q[j]:
-            fr = np.flatnonzero(keep_q[j])
-            q = continuous(q_loc[fr, j], axis=0)  # kept keys, not just frames, stay continuous
-            channels.append(Channel(j, "rotation", fr, q.astype(np.float32)))
+    channels = _channels(t_loc, q_loc, keep_t, keep_q, const_t, const_q)
     written = sum(len(c.frames) for c in channels)
     report = {"frames": F, "nodes": J, "channels": 2 * J, "channels_written": len(channels),
               "keys_full": 2 * J * F, "keys_written": written,
@@ -370,3 +343,40 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
               "max_angle_error_rad": float(g_ang.max(initial=0.0))}
     return Animation(t_loc[0].astype(np.float32), q_loc[0].astype(np.float32), channels, report,
                      (g_pos, g_ang))
+
+
+def _kept_samples(vals: np.ndarray, rows: np.ndarray, const: np.ndarray, red: np.ndarray,
+                  tol: np.ndarray, is_rot: bool, times: np.ndarray | None) -> np.ndarray:
+    """(R, F) bool: the samples written for the channels `rows` of vals
+    (J, F, D), given per row whether it is constant, reduced and its
+    tolerance (m or rad): a constant channel its first, an unreduced one
+    all, a reduced one its keys, or all when key times would cost more."""
+    F = vals.shape[1]
+    k = np.zeros((len(rows), F), bool)
+    k[const, 0] = True
+    k[~const & ~red] = True
+    sel = ~const & red
+    if sel.any():
+        k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot, times)
+        # a reduced channel needs its own key times (4 bytes a key); when
+        # that costs more than it saves, keep every frame (shared times)
+        width = vals.shape[2] * 4
+        dense = sel & (k.sum(axis=1) * (width + 4) >= F * width)
+        k[dense] = True
+    return k
+
+
+def _channels(t_loc: np.ndarray, q_loc: np.ndarray, keep_t: np.ndarray, keep_q: np.ndarray,
+              const_t: np.ndarray, const_q: np.ndarray) -> list[Channel]:
+    """Each joint's translation (m) and rotation (x y z w) channel at its kept
+    samples, float32; constant channels are left out."""
+    channels = []
+    for j in range(t_loc.shape[1]):
+        if not const_t[j]:
+            fr = np.flatnonzero(keep_t[j])
+            channels.append(Channel(j, "translation", fr, t_loc[fr, j].astype(np.float32)))
+        if not const_q[j]:
+            fr = np.flatnonzero(keep_q[j])
+            q = continuous(q_loc[fr, j], axis=0)  # kept keys, not just frames, stay continuous
+            channels.append(Channel(j, "rotation", fr, q.astype(np.float32)))
+    return channels

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -176,13 +177,50 @@ def read_gltf_bake(path: str | Path) -> Bake:
         raise InputError(f"{p}: not a readable treebake glTF file ({exc})") from None
 
 
+@dataclass(frozen=True)
+class _FrameGrid:
+    """The bake's sample times (F,) s from its first frame, frames per
+    second, and the key time (s) of the first frame in the file."""
+
+    times: np.ndarray
+    fps: float
+    offset: float
+
+
 def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
     nodes = doc.get("nodes", [])
     info = doc.get("asset", {}).get("extras", {}).get("treebake", {})
-    anims = doc.get("animations", [])
+    channels, all_keys = _channels(doc, blob)
+    grid = _frame_grid(info, all_keys)
+    parent_of = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+    trees = []
+    for skin in doc.get("skins", []):
+        trees.append(_skin_tree(doc, blob, skin, channels, grid, parent_of, p,
+                                f"tree{len(trees)}"))
+    skinned_names = {t.name for t in trees}
+    for i in doc.get("scenes", [{}])[doc.get("scene", 0)].get("nodes", []):
+        node = nodes[i]
+        if "mesh" in node and "skin" not in node and node.get("name") not in skinned_names \
+                and not node.get("name", "").startswith("projectile_"):
+            trees.append(TreeBake(node.get("name", f"tree{i}"), np.zeros((0, 3)),
+                                  *(np.zeros(0, np.int64) for _ in range(4)),
+                                  np.zeros(0), np.zeros(0, np.int64), np.zeros(0),
+                                  np.zeros(0, np.int64), np.zeros(0, np.int64), [], [],
+                                  np.zeros((1, 0, 3), np.float32),
+                                  np.zeros((1, 0, 4), np.float32), {"static": "no joints"}))
+    meta = {"fps": grid.fps, "scene": p.stem, "source": str(p)}
+    if isinstance(info.get("reduction"), dict):
+        meta["reduction"] = info["reduction"]
+    return Bake(grid.times, trees, meta)
+
+
+def _channels(doc: dict, blob: bytes) -> tuple[dict, list[np.ndarray]]:
+    """(node, "translation" or "rotation") -> key times (K,) s and values
+    (K, 3) or (K, 4) of every animation channel, checked (increasing key
+    times, unit quaternions); and every channel's key times."""
     channels: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}
     all_keys = []
-    for anim in anims:
+    for anim in doc.get("animations", []):
         for ch in anim["channels"]:
             sampler = anim["samplers"][ch["sampler"]]
             keys = _accessor(doc, blob, sampler["input"])[:, 0]
@@ -195,6 +233,12 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
                                  "quaternion (damaged data)")
             channels[(ch["target"]["node"], ch["target"]["path"])] = (keys, values)
             all_keys.append(keys)
+    return channels, all_keys
+
+
+def _frame_grid(info: dict, all_keys: list[np.ndarray]) -> _FrameGrid:
+    """The frames our exporter declared in `asset.extras.treebake`; else the
+    union of the key times `all_keys` (s), else one frame at 24 fps."""
     offset = 0.0  # key time of the bake's first frame (files before frame_start: 0)
     if "fps" in info and "frames" in info:
         fps = float(info["fps"])
@@ -205,77 +249,78 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
         fps = 1.0 / float(np.min(np.diff(times))) if len(times) > 1 else 24.0
     else:
         times, fps = np.zeros(1), 24.0
-    frames = len(times)
-    parent_of = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
-    trees = []
-    for skin in doc.get("skins", []):
-        joints = skin["joints"]
-        index = {node: s for s, node in enumerate(joints)}
-        seg_parent = np.array([index.get(parent_of.get(j, -1), -1) for j in joints],
-                              dtype=np.int64)
-        ibm = _accessor(doc, blob, skin["inverseBindMatrices"]).reshape(-1, 4, 4)
-        rest = points_z_up(-ibm[:, 3, :3])
-        S = len(joints)
-        t_loc = np.empty((frames, S, 3))
-        q_loc = np.empty((frames, S, 4))
-        for s, j in enumerate(joints):
-            node = nodes[j]
-            t_loc[:, s] = node.get("translation", [0.0, 0.0, 0.0])
-            q_loc[:, s] = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
-            if (j, "translation") in channels:
-                t_loc[:, s] = _sample(times + offset, *channels[(j, "translation")],
-                                      rotation=False)
-            if (j, "rotation") in channels:
-                q_loc[:, s] = _sample(times + offset, *channels[(j, "rotation")], rotation=True)
-        norms = np.linalg.norm(q_loc, axis=-1)
-        if np.abs(norms - 1.0).max(initial=0.0) > 1e-3:
-            raise ValueError(f"skin {skin.get('name')!r}: a joint rotation is not a unit "
-                             "quaternion (damaged data)")
-        pos, rot = _world(seg_parent, t_loc, q_loc)
-        end = np.arange(S)
-        tips, tipless = [], []
-        for s in range(S):  # a segment ends where its first child starts
-            kids = np.nonzero(seg_parent == s)[0]
-            if len(kids):
-                end[s] = kids[0]
-                continue
-            tip = nodes[joints[s]].get("extras", {}).get("tip")  # terminal: its own tip
-            if tip is None:  # an older file: the tip is unknown, diff compares its base
-                tipless.append(s)
-                continue
-            end[s] = S + len(tips)
-            tips.append(rest[s] + points_z_up(np.asarray(tip, float)[None])[0])
-        if tips:
-            rest = np.concatenate([rest, np.asarray(tips)])
-        # the segment path rides in extras (node names are made tool-safe)
-        paths = [nodes[j].get("extras", {}).get("segment_path", nodes[j].get("name", f"joint{s}"))
-                 for s, j in enumerate(joints)]
-        tree_info: dict = {"source": p.name}
-        if tipless:
-            tree_info["tipless"] = tipless
-        trees.append(TreeBake(
-            name=skin.get("name", f"tree{len(trees)}"), points=rest,
-            seg_start=np.arange(S), seg_end=end, seg_parent=seg_parent,
-            seg_limb=np.zeros(S, np.int64), width=np.zeros(S), leaf=np.zeros(S, np.int64),
-            leaf_size=np.zeros(S), limb_parent=np.zeros(0, np.int64),
-            limb_attach=np.zeros(0, np.int64), limb_points=[], paths=paths,
-            positions=points_z_up(pos).astype(np.float32),
-            rotations=quats_z_up(rot).astype(np.float32), info=tree_info))
-    skinned_names = {t.name for t in trees}
-    for i in doc.get("scenes", [{}])[doc.get("scene", 0)].get("nodes", []):
-        node = nodes[i]
-        if "mesh" in node and "skin" not in node and node.get("name") not in skinned_names \
-                and not node.get("name", "").startswith("projectile_"):
-            trees.append(TreeBake(node.get("name", f"tree{i}"), np.zeros((0, 3)),
-                                  *(np.zeros(0, np.int64) for _ in range(4)),
-                                  np.zeros(0), np.zeros(0, np.int64), np.zeros(0),
-                                  np.zeros(0, np.int64), np.zeros(0, np.int64), [], [],
-                                  np.zeros((1, 0, 3), np.float32),
-                                  np.zeros((1, 0, 4), np.float32), {"static": "no joints"}))
-    meta = {"fps": fps, "scene": p.stem, "source": str(p)}
-    if isinstance(info.get("reduction"), dict):
-        meta["reduction"] = info["reduction"]
-    return Bake(times, trees, meta)
+    return _FrameGrid(times, fps, offset)
+
+
+def _skin_tree(doc: dict, blob: bytes, skin: dict, channels: dict, grid: _FrameGrid,
+               parent_of: dict[int, int], p: Path, default_name: str) -> TreeBake:
+    """One skin as a tree: its joints are the segments, their rest bases (m)
+    from the inverse bind matrices and their motion sampled on the grid,
+    turned to Z up."""
+    nodes = doc.get("nodes", [])
+    joints = skin["joints"]
+    index = {node: s for s, node in enumerate(joints)}
+    seg_parent = np.array([index.get(parent_of.get(j, -1), -1) for j in joints],
+                          dtype=np.int64)
+    ibm = _accessor(doc, blob, skin["inverseBindMatrices"]).reshape(-1, 4, 4)
+    rest = points_z_up(-ibm[:, 3, :3])
+    S = len(joints)
+    t_loc, q_loc = _local_motion(nodes, joints, channels, grid)
+    norms = np.linalg.norm(q_loc, axis=-1)
+    if np.abs(norms - 1.0).max(initial=0.0) > 1e-3:
+        raise ValueError(f"skin {skin.get('name')!r}: a joint rotation is not a unit "
+                         "quaternion (damaged data)")
+    pos, rot = _world(seg_parent, t_loc, q_loc)
+    end = np.arange(S)
+    tips, tipless = [], []
+    for s in range(S):  # a segment ends where its first child starts
+        kids = np.nonzero(seg_parent == s)[0]
+        if len(kids):
+            end[s] = kids[0]
+            continue
+        tip = nodes[joints[s]].get("extras", {}).get("tip")  # terminal: its own tip
+        if tip is None:  # an older file: the tip is unknown, diff compares its base
+            tipless.append(s)
+            continue
+        end[s] = S + len(tips)
+        tips.append(rest[s] + points_z_up(np.asarray(tip, float)[None])[0])
+    if tips:
+        rest = np.concatenate([rest, np.asarray(tips)])
+    # the segment path rides in extras (node names are made tool-safe)
+    paths = [nodes[j].get("extras", {}).get("segment_path", nodes[j].get("name", f"joint{s}"))
+             for s, j in enumerate(joints)]
+    tree_info: dict = {"source": p.name}
+    if tipless:
+        tree_info["tipless"] = tipless
+    return TreeBake(
+        name=skin.get("name", default_name), points=rest,
+        seg_start=np.arange(S), seg_end=end, seg_parent=seg_parent,
+        seg_limb=np.zeros(S, np.int64), width=np.zeros(S), leaf=np.zeros(S, np.int64),
+        leaf_size=np.zeros(S), limb_parent=np.zeros(0, np.int64),
+        limb_attach=np.zeros(0, np.int64), limb_points=[], paths=paths,
+        positions=points_z_up(pos).astype(np.float32),
+        rotations=quats_z_up(rot).astype(np.float32), info=tree_info)
+
+
+def _local_motion(nodes: list[dict], joints: list[int], channels: dict,
+                  grid: _FrameGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's local translation (F, S, 3) m and rotation (F, S, 4)
+    x y z w (glTF's Y up) on the grid: its channels sampled LINEAR, else its
+    node's fixed transform."""
+    frames, S = len(grid.times), len(joints)
+    t_loc = np.empty((frames, S, 3))
+    q_loc = np.empty((frames, S, 4))
+    for s, j in enumerate(joints):
+        node = nodes[j]
+        t_loc[:, s] = node.get("translation", [0.0, 0.0, 0.0])
+        q_loc[:, s] = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+        if (j, "translation") in channels:
+            t_loc[:, s] = _sample(grid.times + grid.offset, *channels[(j, "translation")],
+                                  rotation=False)
+        if (j, "rotation") in channels:
+            q_loc[:, s] = _sample(grid.times + grid.offset, *channels[(j, "rotation")],
+                                  rotation=True)
+    return t_loc, q_loc
 
 
 def _world(parent: np.ndarray, t_loc: np.ndarray, q_loc: np.ndarray):

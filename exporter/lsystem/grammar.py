@@ -18,6 +18,7 @@ from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
 from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
 from .symbols import AT_COMMANDS
+from .toplevel import find_top, rfind_top, split_top
 
 Module = tuple[str, tuple[float, ...]]
 
@@ -25,7 +26,6 @@ MAX_FILE_BYTES = 1_000_000
 
 _NAME = re.compile(r"[A-Za-z_][A-Za-z_0-9]*")
 _ARROW = re.compile(r"-\((?P<prob>[^()]*)\)->|-->|→|(?<!<)->")
-_RESERVED = set("(),:")
 
 
 @dataclass(frozen=True)
@@ -52,10 +52,6 @@ class Production:
     probabilities: tuple[float, ...]
     file: str
     line: int
-
-    @property
-    def arity(self) -> int:
-        return sum(len(p.params) for p in (*self.left, self.pred, *self.right))
 
 
 @dataclass(frozen=True)
@@ -264,6 +260,21 @@ def load_grammar(path: str | Path) -> Grammar:
     return parse_grammar(text, file=str(p), name=p.stem)
 
 
+def _err_at(file: str, lineno: int):
+    """`err(message, col)` for one line: a GrammarError at 0-based column col."""
+    return lambda message, col: GrammarError(message, file, lineno, col + 1)
+
+
+@dataclass
+class _FileParts:
+    """A grammar's lines sorted: the defines' values, the settings' texts
+    (key -> (value text, line, 0-based column)) and the production lines."""
+
+    constants: dict[str, float] = field(default_factory=dict)
+    headers: dict[str, tuple[str, int, int]] = field(default_factory=dict)
+    productions: list[tuple[int, str]] = field(default_factory=list)  # (line, text)
+
+
 def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> Grammar:
     """Parse grammar text. Defines are read first (in order), then settings
     and productions, so productions may use defines written below them."""
@@ -273,19 +284,54 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         line = text[: text.index("\x00")].count("\n") + 1
         raise GrammarError("NUL character in grammar", file, line, 1)
     lines = [_strip_comment(raw) for raw in text.splitlines()]
+    parts = _sort_lines(lines, file)
+    headers, constants = parts.headers, parts.constants
+    declared: tuple[str, ...] = ()
+    if "modules" in headers:
+        value, lineno, col = headers["modules"]
+        names = value.split()
+        for nm in names:
+            if not _NAME.fullmatch(nm):
+                raise _err_at(file, lineno)(f"module name {nm!r} must be a letter followed by "
+                                            "letters, digits or '_'", col + value.find(nm))
+        declared = tuple(sorted(set(names), key=len, reverse=True))
+    settings = _settings(headers, constants, declared, file)
+    if "axiom" not in headers:
+        raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
+    axiom = _axiom(*headers["axiom"], constants, declared, file)
+    productions = _parse_productions(parts.productions, constants, declared, file)
 
-    def err_at(lineno: int):
-        return lambda message, col: GrammarError(message, file, lineno, col + 1)
+    physics_keys = {field_name(k) for k in PHYSICS}
+    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
+    grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
+                    "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
+                    "description"}
+    kwargs = {k: v for k, v in settings.items() if k in grammar_keys}
+    if "width_scale" not in kwargs and "scale" in kwargs:
+        kwargs["width_scale"] = kwargs["scale"]
+    return Grammar(
+        name=settings.get("name") or name,
+        file=file,
+        source_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        axiom=axiom,
+        productions=productions,
+        physics=physics,
+        constants=tuple(sorted(constants.items())),
+        **kwargs,
+    )
 
-    constants: dict[str, float] = {}
-    headers: dict[str, tuple[str, int, int]] = {}  # key -> (value text, line, col)
-    production_lines: list[tuple[int, str]] = []
+
+def _sort_lines(lines: list[str], file: str) -> _FileParts:
+    """Evaluate the defines in order and set the settings and productions
+    aside, from comment-free lines (line 1 first)."""
+    parts = _FileParts()
+    constants, headers = parts.constants, parts.headers
     for lineno, line in enumerate(lines, start=1):
         stripped = line.strip()
         if not stripped:
             continue
         indent = len(line) - len(line.lstrip())
-        err = err_at(lineno)
+        err = _err_at(file, lineno)
         if stripped.startswith("#define"):
             rest = stripped[len("#define"):]
             m = re.match(r"\s+([A-Za-z_][A-Za-z_0-9]*)\s*(=\s*)?", rest)
@@ -301,7 +347,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         if stripped.startswith("#include"):
             raise err("#include is not supported; put everything in one file", indent)
         if _ARROW.search(line):
-            production_lines.append((lineno, line))
+            parts.productions.append((lineno, line))
             continue
         m = re.match(r"\s*([^:]+?)\s*:(.*)$", line)
         if not m:
@@ -318,20 +364,16 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         value = m.group(2)
         lead = len(value) - len(value.lstrip())
         headers[canonical] = (value.lstrip(), lineno, m.start(2) + lead)
+    return parts
 
+
+def _settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, float],
+              declared: tuple[str, ...], file: str) -> dict:
+    """Field name -> value of every setting but axiom and modules, checked
+    against its range (units: lsystem/settings.py)."""
     settings: dict = {}
-    declared: tuple[str, ...] = ()
-    if "modules" in headers:
-        value, lineno, col = headers["modules"]
-        names = value.split()
-        for nm in names:
-            if not _NAME.fullmatch(nm):
-                raise err_at(lineno)(f"module name {nm!r} must be a letter followed by letters,"
-                                     " digits or '_'", col + value.find(nm))
-        declared = tuple(sorted(set(names), key=len, reverse=True))
-
     for key, (value, lineno, col) in headers.items():
-        err = err_at(lineno)
+        err = _err_at(file, lineno)
         if key in ("name", "description"):
             settings[key] = value.strip()
         elif key in ("ignore", "consider"):
@@ -340,7 +382,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
                 raise err(f"{key} lists symbols without parameters", col)
             settings[key] = frozenset(m.symbol for m in mods)
         elif key == "tropism":
-            parts = _split_top(value, col)
+            parts = split_top(value, col)
             if len(parts) != 3:
                 raise err("tropism needs three numbers: x, y, z (world frame, Z up)", col)
             vec = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
@@ -362,12 +404,14 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
             settings[key] = v
     if "ignore" in settings and "consider" in settings:
         _, lineno, col = headers["consider"]
-        raise err_at(lineno)("use either 'ignore' or 'consider', not both", col)
+        raise _err_at(file, lineno)("use either 'ignore' or 'consider', not both", col)
+    return settings
 
-    if "axiom" not in headers:
-        raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
-    value, lineno, col = headers["axiom"]
-    err = err_at(lineno)
+
+def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],
+           declared: tuple[str, ...], file: str) -> tuple[Module, ...]:
+    """The `axiom:` setting's modules, parameters evaluated."""
+    err = _err_at(file, lineno)
     raw = scan_modules(value, col, declared, err)
     if not raw:
         raise err("axiom is empty", col)
@@ -377,70 +421,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         params = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
                        for t, c in m.args)
         axiom.append((m.symbol, params))
-
-    productions = _parse_productions(production_lines, constants, declared, file)
-
-    physics_keys = {field_name(k) for k in PHYSICS}
-    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
-    grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
-                    "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
-                    "description"}
-    kwargs = {k: v for k, v in settings.items() if k in grammar_keys}
-    if "width_scale" not in kwargs and "scale" in kwargs:
-        kwargs["width_scale"] = kwargs["scale"]
-    return Grammar(
-        name=settings.get("name") or name,
-        file=file,
-        source_hash=hashlib.sha256(text.encode("utf-8")).hexdigest(),
-        axiom=tuple(axiom),
-        productions=productions,
-        physics=physics,
-        constants=tuple(sorted(constants.items())),
-        **kwargs,
-    )
-
-
-def _split_top(text: str, col0: int) -> list[tuple[str, int]]:
-    """Split on commas (or whitespace when there are none) outside parentheses."""
-    parts, depth, start = [], 0, 0
-    if "," not in text:
-        return [(m.group(), col0 + m.start()) for m in re.finditer(r"\S+", text)]
-    for i, ch in enumerate(text):
-        if ch == "(":
-            depth += 1
-        elif ch == ")":
-            depth -= 1
-        elif ch == "," and depth == 0:
-            parts.append((text[start:i], col0 + start))
-            start = i + 1
-    parts.append((text[start:], col0 + start))
-    return parts
-
-
-def _find_top(text: str, chars: str, start: int = 0) -> int:
-    depth = 0
-    for i in range(start, len(text)):
-        ch = text[i]
-        if ch == "(":
-            depth += 1
-        elif ch == ")":
-            depth -= 1
-        elif depth == 0 and ch in chars:
-            return i
-    return -1
-
-
-def _rfind_top(text: str, ch: str) -> int:
-    depth = 0
-    for i in range(len(text) - 1, -1, -1):
-        c = text[i]
-        if c == ")":
-            depth += 1
-        elif c == "(":
-            depth -= 1
-        elif depth == 0 and c == ch:
-            return i
-    return -1
+    return tuple(axiom)
 
 
 def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, ...]:
@@ -460,108 +441,138 @@ def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, 
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class _ProductionLine:
+    """One production line parsed. `key` (contexts, predecessor, condition
+    text) is shared by stochastic alternatives; prob None: not stochastic."""
+
+    key: tuple
+    left: tuple[Pattern, ...]
+    pred: Pattern
+    right: tuple[Pattern, ...]
+    condition: Expr | None
+    successor: tuple[SuccessorModule, ...]
+    prob: float | None
+    line: int
+
+
 def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float],
                        declared: tuple[str, ...], file: str) -> tuple[Production, ...]:
-    parsed = []  # (key, Production-ish pieces, prob or None, line)
-    for lineno, line in lines:
-        def err(message, col, _l=lineno):
-            return GrammarError(message, file, _l, col + 1)
-
-        m = _ARROW.search(line)
-        lhs, rhs, rhs_col = line[: m.start()], line[m.end():], m.end()
-        prob_text = m.group("prob")
-        prob = None
-        if prob_text is not None:
-            prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
-                                     col=m.start("prob"))
-        else:
-            colon = _rfind_top(rhs, ":")
-            if colon >= 0:
-                prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
-                                         col=rhs_col + colon + 1)
-                rhs = rhs[:colon]
-        if prob is not None and not 0.0 <= prob <= 1.0:
-            raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
-
-        colon = _find_top(lhs, ":")
-        cond_text, cond_col = None, 0
-        if colon >= 0:
-            cond_text, cond_col = lhs[colon + 1:], colon + 1
-            lhs = lhs[:colon]
-        if not lhs.strip():
-            raise err("production has no predecessor", 0)
-        lt = _find_top(lhs, "<")
-        gt = _find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
-        if lt >= 0 and _find_top(lhs, "<", lt + 1) >= 0:
-            raise err("more than one '<' in predecessor", _find_top(lhs, "<", lt + 1))
-        if gt >= 0 and _find_top(lhs, ">", gt + 1) >= 0:
-            raise err("more than one '>' in predecessor", _find_top(lhs, ">", gt + 1))
-        pred_start = lt + 1 if lt >= 0 else 0
-        pred_end = gt if gt >= 0 else len(lhs)
-        left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
-        right = _patterns(lhs[gt + 1:], gt + 1, declared, err, "context") if gt >= 0 else ()
-        pred = _patterns(lhs[pred_start:pred_end], pred_start, declared, err, "predecessor")
-        if len(pred) != 1:
-            raise err("the strict predecessor must be exactly one module"
-                      f" (found {len(pred)})", pred_start)
-        for ctx, where in ((left, "left"), (right, "right")):
-            if any(p.symbol in "[]" for p in ctx):
-                raise err(f"brackets in the {where} context are not supported", 0)
-
-        names: dict[str, int] = {}
-        for p in (*left, pred[0], *right):
-            for nm in p.params:
-                if nm in names:
-                    raise err(f"parameter {nm!r} is bound twice in the predecessor", 0)
-                names[nm] = len(names)
-
-        condition = None
-        if cond_text is not None:
-            if not cond_text.strip():
-                raise err("empty condition after ':'", cond_col)
-            condition = compile_expr(cond_text, names, constants, file=file, line=lineno,
-                                     col=cond_col)
-
-        mods = scan_modules(rhs, rhs_col, declared, err)
-        if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
-            mods = []
-        _check_brackets(mods, err)
-        successor = tuple(
-            SuccessorModule(mod.symbol, tuple(
-                compile_expr(t, names, constants, file=file, line=lineno, col=c)
-                for t, c in mod.args))
-            for mod in mods
-        )
-        key = (left, pred[0], right, cond_text.strip() if cond_text else None)
-        parsed.append((key, left, pred[0], right, condition, successor, prob, lineno))
+    """The productions of the production lines (line number, text), in file
+    order; stochastic alternatives become one production, probabilities
+    normalised to sum to 1."""
+    parsed = [_parse_production_line(lineno, line, constants, declared, file)
+              for lineno, line in lines]
 
     # Group stochastic alternatives (same predecessor, contexts and condition).
     productions: list[Production] = []
-    groups: dict[tuple, list] = {}
+    groups: dict[tuple, list[_ProductionLine]] = {}
     order: list[tuple] = []
     for item in parsed:
-        key, prob = item[0], item[6]
-        if prob is None:
+        if item.prob is None:
             order.append(("single", len(order), item))
         else:
-            if key not in groups:
-                groups[key] = []
-                order.append(("group", key, None))
-            groups[key].append(item)
+            if item.key not in groups:
+                groups[item.key] = []
+                order.append(("group", item.key, None))
+            groups[item.key].append(item)
     for kind, key, item in order:
         if kind == "single":
-            _, left, pred, right, cond, succ, _, lineno = item
-            productions.append(Production(left, pred, right, cond, (succ,), (1.0,), file, lineno))
+            productions.append(Production(item.left, item.pred, item.right, item.condition,
+                                          (item.successor,), (1.0,), file, item.line))
             continue
         items = groups[key]
-        total = sum(it[6] for it in items)
+        total = sum(it.prob for it in items)
         if abs(total - 1.0) > 1e-3:
-            lines_txt = ", ".join(str(it[7]) for it in items)
+            lines_txt = ", ".join(str(it.line) for it in items)
             raise GrammarError(
                 f"probabilities for {key[1].symbol!r} (lines {lines_txt}) sum to {total:g};"
-                " they must sum to 1", file, items[0][7], 1)
-        _, left, pred, right, cond, _, _, lineno = items[0]
+                " they must sum to 1", file, items[0].line, 1)
+        first = items[0]
         productions.append(Production(
-            left, pred, right, cond, tuple(it[5] for it in items),
-            tuple(it[6] / total for it in items), file, lineno))
+            first.left, first.pred, first.right, first.condition,
+            tuple(it.successor for it in items), tuple(it.prob / total for it in items), file,
+            first.line))
     return tuple(productions)
+
+
+def _parse_production_line(lineno: int, line: str, constants: dict[str, float],
+                           declared: tuple[str, ...], file: str) -> _ProductionLine:
+    """`left < pred > right : condition -> successor`, with an optional
+    probability in [0, 1] (`-(p)->`, or `: p` after the successor)."""
+    err = _err_at(file, lineno)
+    m = _ARROW.search(line)
+    lhs, rhs, rhs_col = line[: m.start()], line[m.end():], m.end()
+    prob_text = m.group("prob")
+    prob = None
+    if prob_text is not None:
+        prob = evaluate_constant(prob_text, constants, file=file, line=lineno,
+                                 col=m.start("prob"))
+    else:
+        colon = rfind_top(rhs, ":")
+        if colon >= 0:
+            prob = evaluate_constant(rhs[colon + 1:], constants, file=file, line=lineno,
+                                     col=rhs_col + colon + 1)
+            rhs = rhs[:colon]
+    if prob is not None and not 0.0 <= prob <= 1.0:
+        raise err(f"probability {prob:g} is outside [0, 1]", rhs_col)
+
+    colon = find_top(lhs, ":")
+    cond_text, cond_col = None, 0
+    if colon >= 0:
+        cond_text, cond_col = lhs[colon + 1:], colon + 1
+        lhs = lhs[:colon]
+    left, pred, right = _predecessor(lhs, declared, err)
+
+    names: dict[str, int] = {}
+    for p in (*left, pred, *right):
+        for nm in p.params:
+            if nm in names:
+                raise err(f"parameter {nm!r} is bound twice in the predecessor", 0)
+            names[nm] = len(names)
+
+    condition = None
+    if cond_text is not None:
+        if not cond_text.strip():
+            raise err("empty condition after ':'", cond_col)
+        condition = compile_expr(cond_text, names, constants, file=file, line=lineno,
+                                 col=cond_col)
+
+    mods = scan_modules(rhs, rhs_col, declared, err)
+    if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
+        mods = []
+    _check_brackets(mods, err)
+    successor = tuple(
+        SuccessorModule(mod.symbol, tuple(
+            compile_expr(t, names, constants, file=file, line=lineno, col=c)
+            for t, c in mod.args))
+        for mod in mods
+    )
+    key = (left, pred, right, cond_text.strip() if cond_text else None)
+    return _ProductionLine(key, left, pred, right, condition, successor, prob, lineno)
+
+
+def _predecessor(lhs: str, declared: tuple[str, ...],
+                 err) -> tuple[tuple[Pattern, ...], Pattern, tuple[Pattern, ...]]:
+    """`left < pred > right` (contexts optional, without brackets) -> the
+    left context, the strict predecessor (one module) and the right context."""
+    if not lhs.strip():
+        raise err("production has no predecessor", 0)
+    lt = find_top(lhs, "<")
+    gt = find_top(lhs, ">", lt + 1 if lt >= 0 else 0)
+    if lt >= 0 and find_top(lhs, "<", lt + 1) >= 0:
+        raise err("more than one '<' in predecessor", find_top(lhs, "<", lt + 1))
+    if gt >= 0 and find_top(lhs, ">", gt + 1) >= 0:
+        raise err("more than one '>' in predecessor", find_top(lhs, ">", gt + 1))
+    pred_start = lt + 1 if lt >= 0 else 0
+    pred_end = gt if gt >= 0 else len(lhs)
+    left = _patterns(lhs[:lt], 0, declared, err, "context") if lt >= 0 else ()
+    right = _patterns(lhs[gt + 1:], gt + 1, declared, err, "context") if gt >= 0 else ()
+    pred = _patterns(lhs[pred_start:pred_end], pred_start, declared, err, "predecessor")
+    if len(pred) != 1:
+        raise err("the strict predecessor must be exactly one module"
+                  f" (found {len(pred)})", pred_start)
+    for ctx, where in ((left, "left"), (right, "right")):
+        if any(p.symbol in "[]" for p in ctx):
+            raise err(f"brackets in the {where} context are not supported", 0)
+    return left, pred[0], right
