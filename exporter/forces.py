@@ -187,12 +187,13 @@ def drag(air: np.ndarray, vel: np.ndarray, axis: np.ndarray, wood_area: np.ndarr
     return force
 
 
-def frontal_area(axis: np.ndarray, direction: np.ndarray, wood_area: np.ndarray,
-                 leaf_area: np.ndarray) -> np.ndarray:
-    """Area (m^2) a bone presents to a flow along unit `direction` (N, 3)."""
+def frontal_areas(axis: np.ndarray, direction: np.ndarray, wood_area: np.ndarray,
+                  leaf_area: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The areas (m^2) of wood and of foliage a bone along unit `axis`
+    (N, 3) presents to a flow along unit `direction` (N, 3)."""
     cos = np.abs((axis * direction).sum(1))
     sin = np.sqrt(np.clip(1 - cos * cos, 0.0, 1.0))
-    return wood_area * sin + 0.5 * leaf_area
+    return wood_area * sin, 0.5 * leaf_area
 
 
 # ---------------------------------------------------------------------------
@@ -265,18 +266,22 @@ class Explosion:
         return ps * wave, qs * wave**2, direction, arrival
 
     def force(self, points: np.ndarray, t: float, axis: np.ndarray, wood_area: np.ndarray,
-              leaf_area: np.ndarray, diameter: np.ndarray, cd: float) -> np.ndarray:
-        """Blast force (N): drag of the dynamic pressure Cd*q*A plus the
-        overpressure's diffraction pulse p*A, which clears in about three
-        transit times of the member (3*D/c)."""
+              leaf_area: np.ndarray, diameter: np.ndarray, cd_wood, cd_leaf) -> np.ndarray:
+        """Blast force (N) on members at `points` (N, 3) m along `axis`: the
+        drag of the dynamic pressure q with the members' own coefficients,
+        as the wind's drag takes them (wood `cd_wood` on its frontal area,
+        foliage `cd_leaf` on its leaf area; arrays or numbers), plus the
+        overpressure's diffraction pulse p on the frontal area, which clears
+        in about three transit times of the member (3 D / c)."""
         p, q, direction, arrival = self.loads(points, t)
-        area = frontal_area(axis, direction, wood_area, leaf_area)
+        wood, leaf = frontal_areas(axis, direction, wood_area, leaf_area)
         clearing = np.exp(-np.maximum(t - arrival, 0.0) / np.maximum(3 * diameter / SOUND_SPEED,
                                                                       1e-5))
-        return ((cd * q + p * clearing) * area)[:, None] * direction
+        return (q * (cd_wood * wood + cd_leaf * leaf_area)
+                + p * clearing * (wood + leaf))[:, None] * direction
 
     def impulse(self, points: np.ndarray, t: float, axis: np.ndarray, wood_area: np.ndarray,
-                leaf_area: np.ndarray, diameter: np.ndarray, cd: float):
+                leaf_area: np.ndarray, diameter: np.ndarray, cd_wood, cd_leaf):
         """The impulse (N s, (N, 3)) `force` has delivered at each point from
         its front's arrival to time t, for members held in their present
         orientation (exact: the Friedlander pulse and the diffraction's
@@ -290,8 +295,9 @@ class Explosion:
         drag = qs * td * (_moment(0, 2 * self.decay, x) - 2 * _moment(1, 2 * self.decay, x)
                           + _moment(2, 2 * self.decay, x))
         pulse = ps * td * (_moment(0, beta, x) - _moment(1, beta, x))
-        area = frontal_area(axis, direction, wood_area, leaf_area)
-        return ((cd * drag + pulse) * area)[:, None] * direction, arrival, td
+        wood, leaf = frontal_areas(axis, direction, wood_area, leaf_area)
+        return ((cd_wood * wood + cd_leaf * leaf_area) * drag
+                + pulse * (wood + leaf))[:, None] * direction, arrival, td
 
     def reach(self, threshold: float = 500.0) -> float:
         """Distance (m) beyond which the peak overpressure is below

@@ -53,7 +53,9 @@ class Quality:
     its children). bone_length: bones are merged segments at least this
     fraction of the tree height (0: one bone per segment). tier, nonlinear,
     cut_engine: which engine moves a tree (the enums above; strings are
-    converted)."""
+    converted). hand_back: a tree a nonlinear engine took for large motion
+    or a joint near breaking comes back to the linear tier once back in
+    its range (False: it stays)."""
 
     name: str = "default"
     substep_rate: float = 960.0
@@ -70,6 +72,7 @@ class Quality:
     nonlinear: NonlinearPolicy = NonlinearPolicy.AUTO
     reference_step: float = 1 / 480
     cut_engine: CutEngine = CutEngine.PYMUNK
+    hand_back: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "tier", TierPolicy(self.tier))

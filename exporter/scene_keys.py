@@ -207,6 +207,9 @@ QUALITY = table(
     Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` or "
         "`reference`", kind="choice", choices=("pymunk", "reference"),
         doc_default=_levels("cut_engine")),
+    Key("hand_back", "a tree a nonlinear engine took for large motion or a joint near "
+        "breaking comes back to the linear tier once back in its range (`false`: it stays)",
+        kind="bool", doc_default=_levels("hand_back")),
     Key("reference_step", "the reference's step when it takes a tree from the linear tier",
         "s", None, 1e-5, 1 / 60, doc_default=_levels("reference_step")),
     Key("substep_rate", "physics steps per second (split further, automatically, during "

@@ -2,18 +2,15 @@
 default and allowed range is a `Key` in one table (lsystem/settings.py for
 grammars, scene_keys.py for scenes). The parsers read defaults and ranges
 from the tables and build their error messages from them; docs/grammar.md
-and docs/scenes.md get their key tables from `markdown` (between
-`<!-- keys:NAME -->` and `<!-- /keys -->` markers), and a test checks the
-docs match (`python -m treebake.settings --write` regenerates them).
+and docs/scenes.md get their key tables from `markdown` (docs_tables.py
+writes them between `<!-- keys:NAME -->` and `<!-- /keys -->` markers,
+and a test checks the docs match).
 """
 
 from __future__ import annotations
 
 import math
-import re
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 
@@ -117,50 +114,3 @@ def markdown(keys: dict[str, Key], quote=lambda k: f"`{k.name}`") -> str:
             name += " (" + ", ".join(f"`{a}`" for a in k.aliases) + ")"
         rows.append(f"| {name} | {k.meaning} | {k.unit} | {_default(k)} | {_range(k)} |")
     return "\n".join(rows)
-
-
-_BLOCK = re.compile(r"(<!-- keys:(?P<name>[\w.]+) -->\n)(?P<body>.*?)(<!-- /keys -->)", re.S)
-
-
-def render(text: str, tables: dict[str, str]) -> str:
-    """`text` with every marked block replaced by its table."""
-    def sub(m):
-        name = m.group("name")
-        if name not in tables:
-            raise KeyError(f"no key table {name!r}")
-        return m.group(1) + tables[name] + "\n" + m.group(4)
-    return _BLOCK.sub(sub, text)
-
-
-def doc_tables() -> dict[Path, dict[str, str]]:
-    """Every generated table, by docs file (relative to the repository)."""
-    from .lsystem.settings import grammar_tables
-    from .scene_keys import scene_tables
-
-    return {Path("docs/grammar.md"): grammar_tables(), Path("docs/scenes.md"): scene_tables()}
-
-
-def main(argv: list[str] | None = None) -> int:
-    """python -m treebake.settings [--write] [ROOT]: check (or rewrite) the
-    docs' key tables."""
-    argv = sys.argv[1:] if argv is None else argv
-    write = "--write" in argv
-    rest = [a for a in argv if a != "--write"]
-    root = Path(rest[0]) if rest else Path(".")
-    stale = []
-    for rel, tables in doc_tables().items():
-        path = root / rel
-        old = path.read_text(encoding="utf-8")
-        new = render(old, tables)
-        if new != old:
-            stale.append(str(rel))
-            if write:
-                path.write_text(new, encoding="utf-8")
-    if stale and not write:
-        print("out of date: " + ", ".join(stale) + " (python -m treebake.settings --write)")
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

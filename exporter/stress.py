@@ -96,6 +96,7 @@ class Result:
     passed: bool
     notes: list[str] = field(default_factory=list)
     error: str = ""
+    engines: str = ""  # the tree's engines, as its bake records them (info["solver"])
 
 
 def _sapling(extra: str = "", drop: tuple[str, ...] = ("rupture", "anchor")) -> str:
@@ -235,7 +236,7 @@ def gravitational_energy(bake: Bake) -> np.ndarray:
     if bake.trees[0].static:
         return np.zeros(len(bake.times) - 1)
     mids, mass = _segment_masses(bake)
-    pe = 9.81 * (mids[..., 2] * mass).sum(1)
+    pe = float(bake.meta.get("gravity", 9.81)) * (mids[..., 2] * mass).sum(1)  # m/s^2
     return 0.5 * (pe[1:] + pe[:-1])
 
 
@@ -296,16 +297,14 @@ def measure(bake: Bake, quiet: float, event: bool = False) -> tuple[float, float
 def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -> Result:
     """Bake a case with a solver ("planar" at quality `level`, or "full").
     The planar LOD's `engine` for what leaves its linear tier: "auto" (the
-    reference when MuJoCo is installed), "articulated" (with the pymunk tier
-    for breaks, cuts and hits: what an install without the `reference`
-    extra runs) or "pymunk" (cuts too)."""
+    engine table, docs/physics.md), "pymunk" or "reference" (every reason)."""
     raw = dict(case.scene, duration=case.duration, fps=24.0, name=case.name)
     label = f"planar {level}" if solver == "planar" else solver
     quality = None
     if solver == "planar":
         quality = QUALITIES[level]
-        if engine in ("articulated", "pymunk"):
-            quality = replace(quality, nonlinear=engine)  # cuts follow it (cut_engine)
+        if engine in ("pymunk", "reference"):
+            quality = replace(quality, nonlinear=engine)
             label += f" {engine}"
     start = time.perf_counter()
     try:
@@ -342,7 +341,8 @@ def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -
     passed = (finite and growth <= ENERGY_TOLERANCE and gap <= GAP_TOLERANCE
               and gain <= GAIN_TOLERANCE and not rise > RISE_TOLERANCE)
     return Result(case.name, label, case.what, finite, growth, gain, gap, rise, spin, rest,
-                  broken, seconds, passed, list(bake.meta.get("notes", [])))
+                  broken, seconds, passed, list(bake.meta.get("notes", [])),
+                  engines=bake.trees[0].info.get("solver", "static"))
 
 
 def report_markdown(results: list[Result]) -> str:

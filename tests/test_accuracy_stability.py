@@ -70,15 +70,16 @@ def test_stress_case(name, solver, level):
     assert r.spin > 1e-4
     assert r.energy_growth <= ENERGY_TOLERANCE  # no perpetual motion: energy never grows
     assert r.gain <= GAIN_TOLERANCE  # the audit: no energy the loads did not supply
-    assert r.gap <= GAP_TOLERANCE  # joints hold, measured on the bake
+    if "pymunk" in r.engines:  # only its pivots can open (elsewhere gap = 0 by construction)
+        assert r.gap <= GAP_TOLERANCE  # joints hold, measured on the bake
     assert not math.isnan(r.rest)
     assert r.passed
 
 
 @pytest.mark.parametrize("name", ["blast breaks branches", "tornado uproots",
                                   "crate breaks a stem"])
-def test_event_case_at_draft_without_mujoco(name):
-    # what `pip install treebake` runs: the pymunk tier for every event. At
+def test_event_case_at_draft_on_the_pymunk_tier(name):
+    # `nonlinear = "pymunk"`: the pymunk tier for every event. At
     # draft the blasted sapling gained 1.2x its energy and the tornado's
     # 1.9x (a freed stem's damping dragged it along with its root body, spun
     # by the ground; a broken stem's loose base went 0.16 m into the ground
@@ -87,14 +88,14 @@ def test_event_case_at_draft_without_mujoco(name):
     case = next(c for c in cases(long=True) if c.name == name)
     r = run(case, "planar", "draft", engine="pymunk")
     assert r.solver == "planar draft pymunk"
-    assert not any("MuJoCo" in n or "reference" in n for n in r.notes), r.notes
+    assert "reference" not in r.engines, r.engines
     assert r.gain <= GAIN_TOLERANCE
     assert r.energy_growth <= ENERGY_TOLERANCE
     assert r.passed
 
 
 @pytest.mark.parametrize("name", ["blast 50 kg at 5 m", "blast 500 kg at 6 m"])
-def test_a_huge_blast_at_draft_without_mujoco_holds_its_joints(name):
+def test_a_huge_blast_at_draft_on_the_pymunk_tier_holds_its_joints(name):
     # twigs the blast spins at 300 rad/s: with substeps split into at most
     # 32 steps, a pivot opened from 0.5 % to 1.1 % within a frame and the
     # bake stopped; once a pivot passes 0.25 % the split may go to 128
@@ -102,7 +103,8 @@ def test_a_huge_blast_at_draft_without_mujoco_holds_its_joints(name):
     r = run(case, "planar", "draft", engine="pymunk")
     assert r.finite, r.error
     assert r.gap <= GAP_TOLERANCE
-    split = [n for n in r.notes if "substeps were split into up to" in n]
+    assert "pymunk" in r.engines, r.engines
+    split = [n for n in r.notes if "substeps split into up to" in n]
     assert split and int(split[0].split("up to ")[1].split()[0]) > 32, r.notes
     assert r.passed
 

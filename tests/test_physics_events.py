@@ -66,7 +66,6 @@ def test_a_felled_stems_base_stays_on_the_ground_on_the_reference(root):
     the ground as it fell (an oak's 0.43 m, a felled spruce's 0.37 m); a
     small sphere on its lower end now holds it up, as the pymunk tier's
     contact does."""
-    pytest.importorskip("mujoco")
     raw = {"duration": 6.0, "fps": 24,
            "tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}],
            "cut": [{"tree": 0, "time": 0.5, "direction": 30.0}]}
@@ -116,32 +115,24 @@ def test_overloaded_branch_breaks_falls_and_rolls_as_the_reference(tmp_path):
 def test_uprooted_tree_falls_downwind(tmp_path, root):
     """A shallow root plate (anchor 30 N m) in a 40 m/s storm: the root joint
     goes, the sapling falls downwind and, nothing holding it, the storm rolls
-    it along the ground, as the reference (a second solver) has it too. On
-    the LOD with MuJoCo and without it (the articulated tier's free root:
-    uprooted at 0.290 s against the reference's 0.292 s)."""
+    it along the ground, as the reference (a second solver) has it too."""
     grammar = edit((root / "grammars" / "sapling.lsys").read_text(),
                    ("anchor: 800", "anchor: 30"), ("rupture: 45e6", ""))
     runs = {}
-    for name, solver, engine in (("planar", "planar", None), ("full", "full", None),
-                                 ("articulated", "planar", "articulated")):
-        quality = {"quality": {"nonlinear": engine}} if engine else {}
-        b = bake(tmp_path, grammar, solver=solver, duration=6.0, **quality,
+    for solver in ("planar", "full"):
+        b = bake(tmp_path, grammar, solver=solver, duration=6.0,
                  wind={"speed": 40.0, "turbulence": 0.2, "ramp": 1.0, "direction": 90.0})
         tree = b.trees[0]
         assert any(e["segment"] == "trunk:0" and e["kind"] == "uprooted"
                    for e in tree.info["events"]), tree.info["events"]
-        if engine:
-            assert "pymunk" not in tree.info["solver"], tree.info["solver"]
-            assert b.meta["energy"][tree.name]["max_gain_fraction"] < 0.02, b.meta["energy"]
-        runs[name] = tip(tree)
+        runs[solver] = tip(tree)
     ref = runs["full"]
-    for name in ("planar", "articulated"):
+    for name in ("planar",):
         lod = runs[name]
         last = lod[-48:]  # the last 2 s
         assert np.median(last[:, 2]) < 0.5, name  # down
         assert lod[-1, 1] > 10.0, name  # downwind (+y), rolled along
-        # as far as the reference takes it (LOD 122 m, articulated 120 m,
-        # reference 122 m at 6 s)
+        # as far as the reference takes it (LOD 122 m, reference 122 m at 6 s)
         assert lod[-1, 1] == pytest_approx(ref[-1, 1], 0.2 * ref[-1, 1]), (name, lod[-1], ref[-1])
 
 
@@ -153,7 +144,6 @@ def test_an_uprooted_palm_on_the_reference_creates_no_energy():
     energy in: +822 kJ (1.67x the tree's energy) and 115 joints broken in
     a cascade, with no error. The audit (an independent ledger of kinetic,
     gravitational, spring energy and the loads' work) must stay balanced."""
-    pytest.importorskip("mujoco")
     from treebake.library import presets_folder
     from treebake.scene import load_scene
 
@@ -182,7 +172,6 @@ def test_tornado_debris_rolling_on_the_ground_creates_no_energy():
     wind's work) in its last 1.7 s, with no load doing work. Every tree's
     audit (kinetic, gravitational and spring energy against the loads'
     work) must stay within the bake's own warning threshold."""
-    pytest.importorskip("mujoco")
     from treebake.library import presets_folder
     from treebake.scene import load_scene
     from treebake.sim.audit import GAIN_TOLERANCE
@@ -266,13 +255,12 @@ def test_projectile_and_tree_exchange_momentum(tmp_path):
 
 def test_projectile_trees_run_on_the_reference_and_fall_back_to_pymunk(tmp_path, root,
                                                                          monkeypatch):
-    """Trees a projectile can reach run on the reference when MuJoCo is
-    installed (a crate must smash the sapling as the truth does); where the
-    reference fails (here made to), the pymunk tier takes them from the
-    start, the projectile included, and the bake says so."""
-    pytest.importorskip("mujoco")
+    """Trees a projectile can reach run on the reference (a crate must smash
+    the sapling as the truth does); where the reference fails (here made
+    to), the pymunk tier takes them from the start, the projectile
+    included, and the bake says so."""
     from treebake.errors import SimulationError
-    from treebake.sim import reference
+    from treebake.sim.reference import ReferenceTier
 
     grammar = (root / "grammars" / "sapling.lsys").read_text()
     hit = {"duration": 1.5, "projectile": [{"shape": "box", "size": 0.3, "mass": 20.0,
@@ -284,7 +272,7 @@ def test_projectile_trees_run_on_the_reference_and_fall_back_to_pymunk(tmp_path,
             def fail(self, *args, **kwargs):
                 raise SimulationError("made to fail for the test", "sapling", 0, 0.0)
 
-            monkeypatch.setattr(reference.ReferenceSolver, "run", fail)
+            monkeypatch.setattr(ReferenceTier, "advance_to", fail)
         (tmp_path / name).mkdir()
         b = bake(tmp_path / name, grammar, **hit)
         tree = b.trees[0]
@@ -310,7 +298,6 @@ def test_a_blast_is_handed_over_before_a_joint_passes_its_strength(tmp_path, roo
     (parts of 5.2 ms: the trunk base uprooted at the hand-over). The
     engine takes it from where the blast found it (lod.py, `leaves`): the
     hand-over is at the blast's arrival, in the linear step it came in."""
-    pytest.importorskip("mujoco")
     grammar = (root / "grammars" / "sapling.lsys").read_text()
     b = bake(tmp_path, grammar, duration=1.0,
              explosion=[{"position": [3.0, 0.0, 1.0], "time": 0.5, "charge": 50.0}])
@@ -321,24 +308,18 @@ def test_a_blast_is_handed_over_before_a_joint_passes_its_strength(tmp_path, roo
     assert all(t > handed[0] + 1e-3 for t in broke), events
 
 
-def test_a_cut_at_final_goes_to_the_reference_or_says_why_not(tmp_path, root, monkeypatch):
-    """`final` hands a felled tree to the reference (Quality.cut_engine);
-    without MuJoCo it falls on the pymunk tier, and the bake's notes say
-    that the reference is missing rather than leaving it to be guessed."""
-    pytest.importorskip("mujoco")
-    from treebake.sim import quality
-
+def test_a_cut_goes_to_the_engine_of_its_level(tmp_path, root):
+    """A felled tree goes to the pymunk tier at `default` and to the
+    reference at `final` (Quality.cut_engine, docs/physics.md's engine
+    table), whatever is installed, and its tier record says when and why."""
     grammar = (root / "grammars" / "sapling.lsys").read_text()
-    fell = {"duration": 1.5, "quality": "final",
-            "cut": [{"tree": 0, "time": 0.5, "direction": 30.0}]}
-    for installed in (True, False):
-        monkeypatch.setattr(quality, "reference_available", lambda installed=installed: installed)
-        (tmp_path / str(installed)).mkdir()
-        b = bake(tmp_path / str(installed), grammar, **fell)
-        engine = "reference" if installed else "pymunk"
-        assert b.trees[0].info["solver"].startswith(f"linear, then {engine} at 0.500 s")
-        missing = [n for n in b.meta["notes"] if "MuJoCo is not installed" in n]
-        assert bool(missing) != installed, b.meta["notes"]
+    for level, engine in (("default", "pymunk"), ("final", "reference")):
+        fell = {"duration": 1.0, "quality": level,
+                "cut": [{"tree": 0, "time": 0.5, "direction": 30.0}]}
+        (tmp_path / level).mkdir()
+        b = bake(tmp_path / level, grammar, **fell)
+        assert b.trees[0].info["solver"] == \
+            f"linear, then {engine} from 0.500 s (its felling cut)", b.trees[0].info["solver"]
 
 
 EXPLOSION = {"fps": 24, "explosion": [{"position": [0.0, 0.0, 1.0], "time": 0.25, "charge": 10.0}]}
@@ -367,10 +348,10 @@ def converged_reference(scene, monkeypatch, step: float = 1 / 8000):
     """The reference with every step `step` (s) and its loads updated every
     step: the truth its default (1/2000 s, loads every 2 ms, steps split to
     BLAST_STEP with loads every substep while a blast rings) stands for."""
-    from treebake.sim import reference
+    from treebake.sim.reference import stepper
 
     with monkeypatch.context() as m:
-        m.setattr(reference, "DEFAULT_FORCE_RATE", math.inf)
+        m.setattr(stepper, "DEFAULT_FORCE_RATE", math.inf)
         return bake_scene(scene, solver="full", timestep=step)
 
 
@@ -388,7 +369,6 @@ def test_a_blast_breaks_as_many_twigs_on_the_lod_as_on_the_reference(root, monke
     of their strength, went or held by when their neighbours were seen to
     go. Released at the substep (`ReferenceSolver._release`), both break 7
     and 15, the joints within 0.04 ms of the truth's times (the median)."""
-    pytest.importorskip("mujoco")
     scene = explosion_scene(root, ("oak", "sapling"), 0.5)
     truth = converged_reference(scene, monkeypatch)
     broken, times = {"truth": broken_per_tree(truth)}, {"truth": break_times(truth)}
@@ -416,7 +396,6 @@ def test_a_violent_blast_breaks_as_many_joints_with_its_loads_updated_every_subs
     at 2.08 ms (23 at 2.5 ms). A model a blast splits now gets its loads
     every substep: the reference broke 19, the LOD 22; with its joints let go
     at the substep too, 18 and 21 (the issue's bound: within 25 %)."""
-    pytest.importorskip("mujoco")
     scene = parse_scene({"duration": 0.7, "fps": 24,
                          "tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}],
                          "explosion": [{"position": [3.0, 0.0, 1.0], "time": 0.5,
@@ -429,24 +408,19 @@ def test_a_violent_blast_breaks_as_many_joints_with_its_loads_updated_every_subs
 
 
 @pytest.mark.slow
-def test_without_mujoco_a_blast_that_uproots_a_sapling_throws_it_as_the_reference(root):
+def test_a_blast_that_uproots_a_sapling_throws_it_on_the_lod_as_the_reference(root):
     """50 kg of TNT 3 m from the sapling, 5 s (`bench/events.py`'s blast): it
     is uprooted 8 ms into the push, its twigs break and it is thrown some
-    70 m. Without MuJoCo the articulated tier had no free root: an uprooting
-    sent the tree to the pymunk tier, whose planar chains broke 15 joints
-    and peaked at 1638 % of the height against the reference's 20 and
-    2786 %. The tier now lets the root go and flies the tree on a free base
-    (its momentum kept): 18 joints and 2477 %, within the issue's 25 %, and
-    the audit finds no energy the loads did not supply."""
-    pytest.importorskip("mujoco")
+    70 m. The LOD hands it to the reference from the blast's arrival, at
+    its own coarse step: its joints and its flight within 25 % of the
+    reference at its own step, and no energy the loads did not supply."""
     scene = parse_scene({"duration": 5.0, "fps": 24,
                          "tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}],
                          "explosion": [{"position": [3.0, 0.0, 1.0], "time": 0.5,
                                         "charge": 50.0}]}, file="<blast>")
     out = {}
     for name, solver, quality in (
-            ("articulated", "planar", replace(QUALITIES["default"], nonlinear="articulated")),
-            ("reference", "full", None)):
+            ("lod", "planar", None), ("reference", "full", None)):
         b = bake_scene(scene, solver=solver, quality=quality)
         tree = b.trees[0]
         events = tree.info["events"]
@@ -456,9 +430,9 @@ def test_without_mujoco_a_blast_that_uproots_a_sapling_throws_it_as_the_referenc
         out[name] = (sum(e["kind"] in ("broke", "uprooted") for e in events),
                      moved.max() / tree.height)
         assert b.meta["energy"]["sapling"]["max_gain_fraction"] < 0.02, (name, b.meta["energy"])
-        if name == "articulated":
+        if name == "lod":
             assert "pymunk" not in tree.info["solver"], tree.info["solver"]
-    (broken, peak), (ref_broken, ref_peak) = out["articulated"], out["reference"]
+    (broken, peak), (ref_broken, ref_peak) = out["lod"], out["reference"]
     assert ref_broken >= 15 and ref_peak > 10.0, out  # the case uproots and throws
     assert abs(broken - ref_broken) <= 0.25 * ref_broken, out
     assert abs(peak / ref_peak - 1) < 0.25, out
@@ -474,12 +448,8 @@ def test_the_blast_break_counts_are_converged_in_the_step(root, monkeypatch):
     MuJoCo engine splits its 1/480 s step 67 times there; held over the
     split step, its damping lagged the twigs' ringing and pumped it (17
     broken, 32 with the blast step halved); worked out every substep,
-    halving the blast step leaves its count as it is. Without MuJoCo (the
-    articulated tier, which breaks joints too) the LOD breaks 7 (11
-    before its loads followed the ringing twigs: docs/physics.md, "The
-    twigs ring with their loads updated every substep")."""
-    pytest.importorskip("mujoco")
-    from treebake.sim import reference
+    halving the blast step leaves its count as it is."""
+    from treebake.sim.reference import stepper
 
     scene = explosion_scene(root, ("oak",), 0.6)
     broken = {"truth": broken_per_tree(converged_reference(scene, monkeypatch))["oak"],
@@ -487,15 +457,13 @@ def test_the_blast_break_counts_are_converged_in_the_step(root, monkeypatch):
                   converged_reference(scene, monkeypatch, 1 / 32000))["oak"],
               "full": broken_per_tree(bake_scene(scene, solver="full"))["oak"],
               "planar": broken_per_tree(bake_scene(scene, solver="planar"))["oak"]}
-    broken["planar without MuJoCo"] = broken_per_tree(bake_scene(
-        scene, solver="planar", quality=replace(QUALITIES["default"], nonlinear="articulated")))["oak"]
-    monkeypatch.setattr(reference, "BLAST_STEP", reference.BLAST_STEP / 2)
+    monkeypatch.setattr(stepper, "BLAST_STEP", stepper.BLAST_STEP / 2)
     broken["planar, half the blast step"] = broken_per_tree(
         bake_scene(scene, solver="planar"))["oak"]
     assert broken["truth"] >= 5, broken  # the case breaks joints
     assert broken["finer truth"] == broken["truth"], broken
     assert abs(broken["planar, half the blast step"] - broken["planar"]) <= 1, broken
-    for run in ("full", "planar", "planar without MuJoCo"):
+    for run in ("full", "planar"):
         assert abs(broken[run] - broken["truth"]) <= 0.25 * broken["truth"], broken
 
 
@@ -522,8 +490,8 @@ def blasted_sapling_top(root, runs) -> dict:
 
 
 def test_a_tree_the_pymunk_tier_takes_during_a_blast_gets_the_whole_push(root):
-    """Without MuJoCo the LOD hands a tree whose joint nears breaking to the
-    pymunk tier, which carries a child chain's push to its parent only as a
+    """With `nonlinear = "pymunk"` the LOD hands a tree whose joint nears
+    breaking to the pymunk tier, which carries a child chain's push to its parent only as a
     rigid lump. Taken 13 ms into the push, the twigs held the impulse and
     the stem not yet, and the stem never got it: the `explosion` preset's
     oak swayed at a quarter of its amplitude with MuJoCo, its sapling's
@@ -548,40 +516,11 @@ def test_the_pymunk_tier_moves_a_blasted_sapling_as_the_reference(root):
     reference's joints went only at its 2-ms checks; released at the substep
     the reference's sapling breaks 15 joints, as the truth (1/8000 s, loads
     and checks every step: 15, 24.4 %), and its stem peaks at 24.2 %."""
-    pytest.importorskip("mujoco")
     lod = QUALITIES["default"]
     top = blasted_sapling_top(root, {"pymunk": ("planar", replace(lod, nonlinear="pymunk")),
                                      "reference": ("full", lod)})
     pymunk, reference = top["pymunk"][0].max(), top["reference"][0].max()
     assert abs(pymunk / reference - 1) < 0.25, (pymunk, reference)
-
-
-def test_without_mujoco_a_blast_breaks_the_twigs_in_the_articulated_tier_as_the_reference(root):
-    """Without MuJoCo a tree whose joint neared breaking went to the pymunk
-    tier, whose planar chains broke 9 of this blasted sapling's joints
-    where the truth (1/8000 s, loads and checks every step) breaks 15, its
-    stem top peaking at 31.5 % of the height against 24.4 %. The
-    articulated tier, the reference's model, now breaks them itself, each
-    part broken off to rigid debris: 14 joints, 13 of them the reference's,
-    at its times within 0.1 ms (the median), the stem at 24.0 % (the
-    reference 15 and 24.2 %), and the audit finds no energy the loads did
-    not supply."""
-    pytest.importorskip("mujoco")
-    lod = QUALITIES["default"]
-    runs = blasted_sapling_top(root, {
-        "articulated": ("planar", replace(lod, nonlinear="articulated")),
-        "reference": ("full", lod)})
-    (top, _, b), (ref_top, _, ref) = runs["articulated"], runs["reference"]
-    tiers = b.trees[0].info["solver"]
-    assert "articulated" in tiers and "pymunk" not in tiers, tiers
-    times, ref_times = break_times(b), break_times(ref)
-    assert len(ref_times) >= 10, ref_times
-    assert abs(len(times) - len(ref_times)) <= 0.25 * len(ref_times), (times, ref_times)
-    both = times.keys() & ref_times.keys()
-    assert len(both) >= 0.8 * len(ref_times), (times, ref_times)
-    assert np.median([abs(times[j] - ref_times[j]) for j in both]) < 0.5e-3, (times, ref_times)
-    assert abs(top.max() / ref_top.max() - 1) < 0.25, (top.max(), ref_top.max())
-    assert b.meta["energy"]["sapling"]["max_gain_fraction"] < 0.02, b.meta["energy"]
 
 
 def test_a_box_thrown_into_a_crown_hits_the_stem_behind_the_twigs(root):
@@ -591,7 +530,6 @@ def test_a_box_thrown_into_a_crown_hits_the_stem_behind_the_twigs(root):
     reference (12 to 11.6 m/s on both) and breaks. With one contact per
     step the twigs shielded the stem: the box went on at 11.99 m/s, and
     the sapling kept its stem and stood."""
-    pytest.importorskip("mujoco")
     raw = {"duration": 2.0, "fps": 24,
            "tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}],
            "projectile": [{"shape": "box", "size": 0.5, "mass": 60.0,
@@ -624,7 +562,6 @@ def test_an_uprooted_stem_falls_as_a_rigid_rod_on_the_pymunk_tier(tmp_path):
     damped the fall whole (wood's damping, 1.4/s here): 2.46 s against the
     rod's 2.15, and the crate-uprooted oak (stress suite) leant 15 degrees
     in 6 s, where the reference topples it to 72."""
-    pytest.importorskip("mujoco")
     path = tmp_path / "pole.lsys"
     path.write_text(WOOD + "rupture: 45e6\nanchor: 40\naxiom: !(0.08)F(1)F(1)F(1)F(1)\n")
     raw = {"tree": [{"grammar": str(path)}], "fps": 24, "duration": 3.0,

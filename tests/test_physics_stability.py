@@ -1,7 +1,8 @@
 """The thesis' failure modes, as tests: perpetual motion of light branches,
 bones created overlapping, segments pulled apart by strong forces. Every
 case must finish with finite values, lose kinetic energy once the forcing
-stops, and keep its joints together (gap under 1 % of bone length).
+stops, and, on the pymunk tier (whose pivots are constraints that can
+open), keep its joints together (gap under 1 % of bone length).
 
 Both tiers of the planar LOD are held to this: the linear tier (implicit,
 unconditionally stable) and the pymunk tier (`quality = {tier = "pymunk"}`),
@@ -44,30 +45,40 @@ def assert_settles(b, quiet_from: float, window: float = 1.0, final_ratio: float
 
 
 def assert_joints_hold(b):
-    """Measured on the bake: every segment's base stays at its parent's end."""
+    """Measured on the bake: every segment's base stays at its parent's end.
+    Only the pymunk tier can open a joint (its pivots are constraints); the
+    linear tier and the reference compose every pivot from its parent's, so
+    on them the gap is zero by construction and this would prove nothing:
+    the bake must have run on the pymunk tier."""
+    assert any("pymunk" in t.info.get("solver", "") for t in b.trees), \
+        [t.info.get("solver") for t in b.trees]
     gap = joint_gap(b)
     assert gap < 0.01, f"joint gap {gap:.3%} of bone length"
 
 
-def test_light_twig_on_heavy_trunk_with_stiff_spring_and_narrow_cone(tmp_path):
+@pytest.mark.parametrize("tier", ["auto", "pymunk"])
+def test_light_twig_on_heavy_trunk_with_stiff_spring_and_narrow_cone(tmp_path, tier):
     """The thesis' perpetual-motion case: a light bone on a heavy one with a
     stiff spring and a 2-degree cone, shaken by a gust, then calm."""
     grammar = (WOOD + "axiom: !(0.5)F(2)F(2)[&(60)@stiffness(2e4)@cone(2)!(0.006)F(0.15)F(0.15)"
                "@leaves(1)F(0.1)]\n")
-    b = bake(tmp_path, grammar, duration=8.0,
+    b = bake(tmp_path, grammar, duration=8.0, quality={"tier": tier},
              wind={"speed": 30.0, "turbulence": 0.3, "ramp": 0.5, "end": 2.0})
-    assert_joints_hold(b)
+    if tier == "pymunk":
+        assert_joints_hold(b)
     assert_settles(b, quiet_from=3.0)
 
 
-def test_overlapping_and_folded_bones(tmp_path):
+@pytest.mark.parametrize("tier", ["auto", "pymunk"])
+def test_overlapping_and_folded_bones(tmp_path, tier):
     """Several limbs drawn over each other from one point, and a branch
     folded back over its parent."""
     grammar = (WOOD + "axiom: !(0.2)F(1)F(1)[!(0.05)F(1)][!(0.05)F(1)][!(0.05)F(1)]"
                "[&(179)!(0.05)F(0.8)F(0.8)][&(90)!(0.04)F(0.5)&(180)F(0.5)]\n")
-    b = bake(tmp_path, grammar, duration=7.0,
+    b = bake(tmp_path, grammar, duration=7.0, quality={"tier": tier},
              wind={"speed": 25.0, "turbulence": 0.3, "ramp": 0.5, "end": 2.0})
-    assert_joints_hold(b)
+    if tier == "pymunk":
+        assert_joints_hold(b)
     assert_settles(b, quiet_from=3.0)
 
 
@@ -75,7 +86,6 @@ def test_hurricane_then_calm(tmp_path, root):
     grammar = (root / "grammars" / "sapling.lsys").read_text().replace("rupture: 45e6", "")
     b = bake(tmp_path, grammar, duration=8.0,
              wind={"speed": 45.0, "turbulence": 0.3, "ramp": 0.5, "end": 3.0})
-    assert_joints_hold(b)
     assert_settles(b, quiet_from=4.0)
 
 
@@ -85,7 +95,6 @@ def test_explosion_next_to_a_tree(tmp_path, root):
     grammar = (root / "grammars" / "sapling.lsys").read_text().replace("rupture: 45e6", "")
     b = bake(tmp_path, grammar, duration=6.0,
              explosion=[{"position": [6.0, 0.0, 1.0], "time": 0.5, "charge": 2.0}])
-    assert_joints_hold(b)
     assert_settles(b, quiet_from=1.5)
 
 
@@ -99,10 +108,10 @@ def test_stiff_springs_on_light_bones_stay_finite(tmp_path, stiffness, tier):
                "F(0.2)]\n")
     b = bake(tmp_path, grammar, duration=5.0, quality={"tier": tier},
              wind={"speed": 20.0, "turbulence": 0.3, "ramp": 0.5, "end": 1.0})
-    assert_joints_hold(b)
     assert_settles(b, quiet_from=2.0)
     if tier == "pymunk":
-        assert b.meta["stats"]["inertia_floored"] > 0
+        assert_joints_hold(b)
+        assert b.meta["stats"]["pymunk"]["inertia_floored"] > 0
     else:
         assert b.trees[0].info["solver"] == "linear"
-        assert b.meta["stats"]["inertia_floored"] == 0
+        assert "pymunk" not in b.meta["stats"]

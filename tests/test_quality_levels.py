@@ -75,7 +75,7 @@ def test_default_steps_follow_the_same_model_at_a_converged_step(tmp_path):
         bake = bake_scene(scene, solver="planar", quality=quality)
         tree = bake.trees[0]
         runs[name] = segment_ends(tree, np.arange(tree.n_segments)) / tree.height
-        parts[name] = bake.meta["stats"]["linear_parts"]
+        parts[name] = bake.meta["stats"]["linear"]["max_parts"]
     assert parts == {"default": 2, "converged": 1}
     off = np.linalg.norm(runs["default"] - runs["converged"], axis=-1)
     assert off.max() < 0.005  # 0.107 % with the split steps, 4.3 % without
@@ -97,7 +97,7 @@ def test_bamboo_in_gusts_within_the_issues_bound_of_the_every_segment_truth(tmp_
     off = np.linalg.norm(ends[0] - ends[1], axis=-1)
     assert np.sqrt((off * off).mean()) < 0.001
     assert off.max() < 0.02
-    assert lod.meta["stats"]["linear_relinearised"] >= 1
+    assert lod.meta["stats"]["linear"]["relinearised"] >= 1
 
 
 def test_relinearising_a_sapling_in_a_gale_brings_it_no_further_from_the_truth(tmp_path):
@@ -118,5 +118,5 @@ def test_relinearising_a_sapling_in_a_gale_brings_it_no_further_from_the_truth(t
                 for t in (lod.trees[0], truth.trees[0])]
         off = np.linalg.norm(ends[0] - ends[1], axis=-1)
         rms[turn] = float(np.sqrt((off * off).mean()))
-        assert (lod.meta["stats"]["linear_relinearised"] >= 1) == (turn < 1.0)
+        assert (lod.meta["stats"]["linear"]["relinearised"] >= 1) == (turn < 1.0)
     assert rms[QUALITIES["default"].relinearise] <= rms[100.0]

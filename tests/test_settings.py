@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from treebake import scene_keys, settings
+from treebake import docs_tables, scene_keys, settings
 from treebake.errors import GrammarError, SceneError
 from treebake.lsystem import parse_grammar
-from treebake.lsystem.settings import LSYSTEM, PHYSICS, field_name
+from treebake.lsystem.settings import LSYSTEM, PHYSICS
 from treebake.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -21,12 +21,12 @@ SAPLING = str(ROOT / "grammars" / "sapling.lsys")
 
 
 def test_docs_tables_are_generated_from_the_key_tables():
-    for rel, tables in settings.doc_tables().items():
+    for rel, tables in docs_tables.doc_tables().items():
         text = (ROOT / rel).read_text(encoding="utf-8")
         assert text.count("<!-- keys:") == len(tables), rel  # every table is in its doc
-        assert settings.render(text, tables) == text, (
-            f"{rel} is out of date: python -m treebake.settings --write")
-    assert settings.main([str(ROOT)]) == 0
+        assert docs_tables.render(text, tables) == text, (
+            f"{rel} is out of date: python -m treebake.docs_tables --write")
+    assert docs_tables.main([str(ROOT)]) == 0
 
 
 # minimal valid tables, to vary one key at a time
@@ -94,13 +94,19 @@ def test_scene_parser_checks_every_number_against_its_table(table):
             parse_scene(_scene(table, {key.name: int(key.lo)}))  # the bound itself is fine
 
 
-def test_scene_parser_takes_its_defaults_and_ranges_from_the_table(monkeypatch):
+def test_scene_defaults_are_the_documented_ones():
+    """Against what the README and the standards say, not the table the
+    parser reads: standard gravity, film's 24 frames per second, frame 1 the
+    first in every tool, a grown shape that does not sag, a ground; wind
+    measured at 10 m (WMO) with the open-terrain power-law shear 1/7."""
     scene = parse_scene({"tree": [{"grammar": SAPLING}], "wind": {"speed": 3.0}})
-    for name in ("duration", "fps", "frame_start", "gravity", "prestress", "ground"):
-        assert getattr(scene, name) == scene_keys.TOP[name].default
-    for name, key in scene_keys.WIND.items():
-        if name not in ("speed", "beaufort"):
-            assert getattr(scene.wind, name) == key.default
+    assert scene.gravity == pytest.approx(9.80665, abs=0.01)
+    assert (scene.fps, scene.frame_start, scene.prestress, scene.ground) == (24.0, 1, True, True)
+    assert scene.wind.reference_height == 10.0
+    assert scene.wind.shear == pytest.approx(1 / 7, abs=0.005)
+
+
+def test_scene_parser_takes_its_defaults_and_ranges_from_the_table(monkeypatch):
     # the parser reads the table: change the table, the check follows
     parse_scene({"tree": [{"grammar": SAPLING}], "duration": 20.0})
     monkeypatch.setitem(scene_keys.TOP, "duration",
@@ -110,13 +116,21 @@ def test_scene_parser_takes_its_defaults_and_ranges_from_the_table(monkeypatch):
     assert parse_scene({"tree": [{"grammar": SAPLING}]}).duration == 3.0
 
 
-def test_grammar_parser_checks_every_setting_against_its_table():
+def test_grammar_defaults_are_the_documented_ones():
+    """Against the sources (docs/physics-sources.md), not the table the
+    parser reads: green wood's Young's modulus (USDA Wood Handbook, 6-12
+    GPa), a cylinder's drag coefficient across the flow (about 1.2 at
+    sub-critical Reynolds numbers), no breaking unless asked, ABOP's
+    defaults (no tropism, unit scale)."""
+    p = parse_grammar("axiom: F\n").physics
+    assert 6e9 <= p.modulus <= 12e9
+    assert p.drag == pytest.approx(1.2, abs=0.1)
+    assert math.isinf(p.strength) and math.isinf(p.rupture) and math.isinf(p.anchor)
     g = parse_grammar("axiom: F\n")
-    for key in LSYSTEM.values():
-        if key.kind in ("number", "integer", "vector"):
-            assert getattr(g, field_name(key.name)) == key.default, key.name
-    for key in PHYSICS.values():
-        assert getattr(g.physics, field_name(key.name)) == key.default, key.name
+    assert g.elasticity == 0.0 and g.scale == 1.0
+
+
+def test_grammar_parser_checks_every_setting_against_its_table():
     for key in {**LSYSTEM, **PHYSICS}.values():
         if key.kind not in ("number", "integer"):
             continue

@@ -12,11 +12,8 @@ from ..rig import Rig
 from ..rotations import cross
 from .loads import MAX_ACCELERATION, BoneProps
 
-# rad/s: beyond this a bone is taken to be unstable. A blast whips real
-# twigs that fast: 500 kg of TNT at 6 m from an unbreakable sapling spins a
-# twig to 510-560 rad/s between frames on both solvers, and the tree then
-# settles (the stress suite's case); an unstable state passes any bound
-# within steps, so the bound only sets how soon it is caught.
+# rad/s: a bone spinning faster is taken to be unstable (a blast whips real
+# twigs to a quarter of it; an unstable state passes any bound within steps)
 MAX_ANGULAR_SPEED = 2000.0
 
 
@@ -36,15 +33,10 @@ def cap_loads(force: np.ndarray, mass: np.ndarray, t: float, stats,
     to MAX_ACCELERATION x its mass (kg). Counted on `stats.limited`, with
     the bones whose blast push SceneLoads.forces held back (`blast_capped`,
     m/s^2 asked, 0 where none); the first cap is kept in `stats.first_limit`
-    as (tree, segment, time s, m/s^2).
-
-    Loads that would accelerate a bone faster (a blast at a few metres:
-    thousands of g on a twig) break real wood, and in Chipmunk they pull
-    joints apart faster than its iterations hold them; capping the input
-    keeps the constraints consistent, and every cap is reported. A blast's
-    push is capped at the same rate before it gets here, and what that holds
-    back follows (SceneLoads.forces): every solver passes the pulse's whole
-    impulse, whatever it holds its loads for."""
+    as (tree, segment, time s, m/s^2). A blast's push is capped at the same
+    rate before it gets here and what that holds back follows, so every
+    engine passes the pulse's whole impulse (docs/physics.md, "A blast's
+    push is capped in rate, not in impulse")."""
     acc = np.linalg.norm(force, axis=1) / np.maximum(mass, 1e-9)
     over = acc > MAX_ACCELERATION
     asked = acc

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..quality import CutEngine, NonlinearPolicy, Quality, TierPolicy
 from .common import TreeMotion
+from .rules import HIT_SUBSTEP_RATE
 
 
 class Engine(StrEnum):
@@ -142,3 +143,33 @@ class TierReport:
     stats: dict
     notes: list[str]
     timing: dict
+
+
+LEAVING = {  # what each reason means, for the docs' engine table
+    Reason.TURN: "range: a bone turned past 1 rad from its grown pose",
+    Reason.CONE: "range: a hinge past 90 % of its cone",
+    Reason.NEAR_BREAK: "a joint's moment past 80 % of its strength (it may break)",
+    Reason.GROUND: "a branch tip reached the ground",
+    Reason.CUT: "its felling cut",
+    Reason.PROJECTILE: "a thrown object can reach it (from the start)",
+}
+
+
+def engine_table(levels: dict[str, Quality]) -> str:
+    """The docs' table (docs/physics.md): for each reason a tree leaves the
+    linear tier, at each quality level, the one engine that takes it and
+    its step."""
+    def cell(reason: Reason, q: Quality) -> str:
+        engine = engine_for(reason, q)
+        if engine is Engine.REFERENCE:
+            return f"reference, 1/{round(1 / q.reference_step)} s"
+        rate = max(q.substep_rate, HIT_SUBSTEP_RATE) if reason is Reason.PROJECTILE \
+            else q.substep_rate
+        return f"pymunk, 1/{rate:.0f} s"
+
+    rows = ["| the tree leaves the linear tier for | " + " | ".join(f"`{n}`" for n in levels)
+            + " |", "|---" * (len(levels) + 1) + "|"]
+    rows += [f"| {text} (`{reason.value}`) | " + " | ".join(cell(reason, q)
+                                                           for q in levels.values()) + " |"
+             for reason, text in LEAVING.items()]
+    return "\n".join(rows)

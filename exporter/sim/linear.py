@@ -198,9 +198,8 @@ class LinearTier:
             out += self._step()
         self._record(f)
         took = time.perf_counter() - t_frame
-        # what the steps did besides the loads, the solve and rebuilding (range
-        # checks, the error estimate, the mean pose, recording) counts as
-        # updates, so that the tier's timing is all of it, as the reference's is
+        # range checks, the error estimate, the mean pose and recording count
+        # as updates: the tier's timing is all of it
         self.stats.update_seconds += took - (self.stats.step_seconds + self.stats.update_seconds
                                              + self.stats.build_seconds - timed)
         self.stats.frame_seconds.append(took)
@@ -267,10 +266,8 @@ class LinearTier:
         t0 = time.perf_counter()
         self.model.linearise_at(self.q_mean)
         self._state = None
-        # the step's acceleration stays the next predictor's: solving for it
-        # again with the new mass matrix costs a second factorisation and
-        # moved the bamboo's error in gusts by 1 % of itself (linearised at
-        # the pose of the moment, every 0.3 rad: 0.0770 -> 0.0777 %)
+        # the step's acceleration stays the next predictor's (solving for it
+        # again costs a second factorisation for a change of 1 % of the error)
         self.stats.relinearised += 1
         self.stats.build_seconds += time.perf_counter() - t0
 
@@ -298,11 +295,10 @@ class LinearTier:
     def _keep_before_blast(self) -> None:
         """Keep each member tree's state at the start of the step in which a
         blast reaches the first of their bones, until BLAST_RING s after its
-        push on the last is over. (The pymunk tier carries a child chain's
-        push to its parent only as a rigid lump: taking the oak of the
-        `explosion` preset 13 ms into the push, when its twigs held the
-        impulse and its trunk not yet, its trunk swayed at a quarter of the
-        reference's amplitude; lod.py starts it from here instead.)"""
+        push on the last is over: a nonlinear engine takes a tree that
+        leaves meanwhile from there (handoff.HandOff.before_blast; docs/
+        physics.md, "Taken during a blast, a tree starts from where the
+        blast found it")."""
         if not meets(self.blast_windows, self.t, self.h, BLAST_RING):
             self.before_blast = {}
             return
@@ -382,10 +378,9 @@ class LinearTier:
         self.members = [self.members[k] for k in keep]
         self.stats.rebuilds += 1
         self._build(q, v, q_mean)
-        # the trees that stay keep their loads' last update (the work of the
-        # next step is measured from it): reset, a step's work went unrecorded
-        # for every tree that stayed, each time one left (a 50-tree forest in
-        # a hurricane, as 33 trees left within 0.6 s: birches 7-27 % up)
+        # the trees that stay keep their loads' last update: the work of the
+        # next step is measured from it (docs/physics.md, "The work of the
+        # trees that stay in the linear tier")
         self.load_work.keep(dof[0::2] // 2)
         return out
 

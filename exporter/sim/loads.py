@@ -14,17 +14,10 @@ from ..scene import Scene
 # Below these, a field is taken not to move a tree (used to skip simulation).
 MIN_PRESSURE = 200.0  # Pa, explosion peak overpressure
 MIN_AIR_SPEED = 0.5  # m/s, vortex air speed
-# A blast asks thousands of g of a twig for a millisecond or two (50 kg of
-# TNT at 3 m: 1.2 ms). Its push is capped at MAX_ACCELERATION x each bone's
-# mass and what the cap holds back is delivered after, at the same rate, so
-# the bone gets the pulse's whole impulse (momentum is kept; only the timing
-# is spread). The cap acts on the pulse's exact cumulative impulse, so a
-# solver holding its loads 2 ms (the reference), 5.2 ms (the linear tier's
-# split steps) or 8.3 ms (pymunk) passes the same impulse by the end of
-# every hold. Capping the held average instead (2000 m/s^2 x 2 ms per hold)
-# dropped most of the impulse, and how much depended on the holds: a pulse
-# straddling two passed twice what one inside a hold passed, and at 125 us
-# holds a sapling's sway was 13.4 % of its height against 25.6 % at 2 ms.
+# A blast's push is capped at MAX_ACCELERATION x each bone's mass and what
+# the cap holds back is delivered after at the same rate: the bone gets the
+# pulse's whole impulse, whatever an engine holds its loads for
+# (docs/physics.md, "A blast's push is capped in rate, not in impulse")
 MAX_ACCELERATION = 2000.0  # m/s^2: external loads on a bone are capped here (reported)
 
 
@@ -132,7 +125,8 @@ class SceneLoads:
         for e in self.explosions:
             if t_blast + dt < e.time:
                 continue
-            args = (axis, props.wood_area, props.leaf_area, props.diameter, 1.2)
+            args = (axis, props.wood_area, props.leaf_area, props.diameter, props.cd_wood,
+                    props.cd_leaf)
             if dt <= 0:  # a sample (rigid debris), capped at the rate
                 blast = e.force(com, t, *args)
                 asked = np.linalg.norm(blast, axis=1) / props.mass
@@ -177,7 +171,8 @@ class SceneLoads:
         out = []
         for e in self.explosions:
             total, arrival, duration = e.impulse(com, math.inf, axis, props.wood_area,
-                                                 props.leaf_area, props.diameter, 1.2)
+                                                 props.leaf_area, props.diameter, props.cd_wood,
+                                                 props.cd_leaf)
             pushed = np.linalg.norm(total, axis=1) / (props.mass * MAX_ACCELERATION)
             out.append((float(arrival.min(initial=np.inf)),
                         float((arrival + np.maximum(duration, pushed)).max(initial=e.time))))

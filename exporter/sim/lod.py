@@ -85,7 +85,8 @@ def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene:
 def spans_text(spans: list[TierSpan]) -> str:
     """Which engines moved a tree and from when, in words: "linear, then
     reference from 1.234 s (trunk/2:0: a joint past 80% of its strength)"."""
-    parts = [spans[0].engine.value]
+    first = spans[0]
+    parts = [f"{first.engine.value} ({first.detail})" if first.detail else first.engine.value]
     parts += [f"{s.engine.value} from {s.start:.3f} s ({s.detail})" for s in spans[1:]]
     return ", then ".join(parts)
 

@@ -65,8 +65,8 @@ def lod_notes(stats: dict[str, dict], reports: list[TierReport], returned: int) 
     if broke:
         notes.append(broke)
     if returned:
-        notes.append(f"{returned} time{'s' if returned > 1 else ''} a tree came back to the "
-                     "linear tier, back in its range")
+        notes.append(f"trees came back to the linear tier {returned} time"
+                     f"{'s' if returned > 1 else ''}, back in its range")
     return notes
 
 

@@ -134,8 +134,9 @@ class Chunk:
                      f"failed ({exc}); the pymunk tier takes over")
             for i in run.trees:
                 last = self.records[i].spans[-1]
-                self.records[i].spans[-1] = replace(
-                    last, engine=Engine.PYMUNK, detail=f"{last.detail}; the reference failed")
+                why = f"{last.detail}; the reference failed" if last.detail else \
+                    "the reference failed"
+                self.records[i].spans[-1] = replace(last, engine=Engine.PYMUNK, detail=why)
             return [replace(run, engine=Engine.PYMUNK)]
         for i, m in zip(run.trees, tier.motions()):
             self.records[i].take(m, tier.first_frame, self.work_before.get(i, 0.0),
@@ -221,7 +222,8 @@ def open_tier(run: Run, chunk: Chunk):
         (back,) = starts
         return LinearTier(trees, scene, quality, loads, substeps, log, back.frame,
                           (back.q, back.v))
-    returnable = starts is not None and all(s.reason in RETURNABLE for s in starts)
+    returnable = quality.hand_back and starts is not None and all(
+        s.reason in RETURNABLE for s in starts)
     if run.engine is Engine.REFERENCE:
         from .reference import ReferenceTier
 

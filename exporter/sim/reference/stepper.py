@@ -152,9 +152,8 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         raise SimulationError(f"{what} (unstable; try a smaller timestep)", tree, seg, t)
 
     def _clamp_spin(self) -> None:
-        """Clamp the spin of free parts at MAX_SPIN (as the planar LOD's
-        debris): a stick rolled under a sliding box would spin without
-        bound. Counted in stats.clamped."""
+        """Clamp the spin of free parts at rules.MAX_SPIN (counted in
+        stats.clamped)."""
         for g in self.groups:
             free = np.nonzero(g.free_dof >= 0)[0]
             if not len(free):
@@ -184,13 +183,10 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
     def _blast_step(self, g: Group, t: float, damped: bool, ready: bool) -> None:
         """One step (from t, s) of a model a blast splits, in its substeps,
         each with its own loads, damping and joint moments (`ready`: the
-        first substep's mj_step1 is done). Held over a step split 67 times
-        (the LOD's 1/480 s), the damping lagged a twig's ringing at hundreds
-        of Hz by more than half a period and pumped it (the `explosion`
-        preset's oak broke 22 joints at 1/64000 s instead of 7); and the
-        loads, held over the load interval, gave a violent blast's breaks
-        by that interval (50 kg of TNT 3 m from a sapling: 16 joints at
-        2 ms, 24 at 2.5 ms, 20-22 with the loads updated every step)."""
+        first substep's mj_step1 is done): held over the whole step, the
+        damping lags a ringing twig and pumps it, and the breaks depend on
+        the load interval (docs/physics.md, "Loads every substep while a
+        blast rings")."""
         h = self.h / g.substeps
         for k in range(g.substeps):
             if k or not ready:
@@ -232,14 +228,10 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
     def _damping(self, g: Group) -> None:
         """Structural damping as generalized forces (qfrc_applied): each
         limb's joints get -rate M_LL qdot_L, M_LL the limb's block of the
-        mass matrix (its own bones and all they carry, at the current pose)
-        and qdot_L its own joint rates. This is the rig's mass-proportional
-        damping of every bone's motion relative to its limb's frame, with
-        what the limb carries moving with it (the planar LOD's lumped
-        bodies, and the Rayleigh quotient behind rig.alpha), so each limb's
-        fundamental gets the grammar's damping ratio; as joint torques it
-        acts with equal and opposite reaction on the frame bone and only
-        ever removes energy (M_LL is positive definite)."""
+        mass matrix (its bones and all they carry, at the current pose) and
+        qdot_L its own joint rates: the rig's mass-proportional damping of
+        every bone's motion relative to its limb's frame (the linear tier's
+        C, joint_space.py). As joint torques it only removes energy."""
         d = g.data
         qv = d.qvel
         w = d.M[g.damp_adr] * g.damp_rate
@@ -255,16 +247,12 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
 
     def _stable_scale(self, g: Group, tau: np.ndarray, qv: np.ndarray) -> float:
         """The factor (<= 1) that keeps an explicit damping force D v from
-        overshooting on a model with free parts. A limb's block of M stands
-        for what its hinges move while its frame holds; on a part whose first
-        bone is free (broken off, uprooted, felled) the frame gives way and
-        the hinges move far less mass: at an uprooted bamboo culm's base many
-        times less, and the explicit damping blew up (hurricane, 1/2000 s:
-        3e4 rad/s within 4 ms). Over one step the damping changes the
-        kinetic energy by -s h v.Dv + s^2 h^2 (Dv).M^-1(Dv) / 2: the scale
-        s = min(1, v.Dv / (h (Dv).M^-1(Dv))) removes the most energy a step
-        can, never adds any, and is 1 wherever the step resolves the
-        damping (every standing tree)."""
+        overshooting on a model with free parts, whose hinges move far less
+        mass than the limb's block of M stands for. Over one step the
+        damping changes the kinetic energy by -s h v.Dv + s^2 h^2
+        (Dv).M^-1(Dv) / 2: s = min(1, v.Dv / (h (Dv).M^-1(Dv))) removes the
+        most a step can and never adds any (docs/physics.md, "Free parts on
+        the reference")."""
         lost = float(qv @ tau)  # v.Dv >= 0 (D is positive semidefinite)
         if lost <= 0.0:
             return 1.0
@@ -381,18 +369,13 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
                 launched[i] = True
 
     def _split(self, t: float) -> None:
-        """Split the step of models whose free parts spin fast: a stiff
-        broken limb rolling on the ground at 40-70 rad/s gained energy
-        without bound at h = 2.1 ms (tornado: a broadleaf's stem pieces,
-        x3 in 1 s, with no load doing work; at h/2 it decays). The model
-        steps in as many equal substeps as keep every free part's turn per
-        substep under SPIN_PER_STEP (at most MAX_SUBSTEPS), loads and
-        damping held; counted in stats.split. And of models a blast pushes
-        or whose twigs it rings (`_blast_rings`), to BLAST_STEP, counted in
-        stats.blast_split: loads and damping worked out again every substep
-        (`_blast_step`), and the joints' bending moments tracked over every
-        substep (`Group.peak`), so that a twig's peak between two checks is
-        not missed."""
+        """Split the step of models whose free parts spin fast into as many
+        equal substeps as keep every free part's turn per substep under
+        SPIN_PER_STEP (at most MAX_SUBSTEPS; loads and damping held;
+        stats.split), and of models a blast pushes or whose twigs it rings
+        to BLAST_STEP (stats.blast_split; loads, damping and the joints'
+        peak moments every substep, `_blast_step`). docs/physics.md,
+        "Fast-spinning free parts"."""
         if self.blast_split == 1 and not any(g.has_free for g in self.groups):
             return  # (every model steps whole: nothing can have split it)
         for gi, g in enumerate(self.groups):
