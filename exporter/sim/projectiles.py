@@ -1,13 +1,8 @@
-"""Projectiles (heavy boxes and spheres) for the planar LOD.
-
-They fly in 3D under gravity, integrated at the force rate. Contact with
-bones is a swept sphere-capsule test along each step's path (no tunnelling
-through thin branches); a hit exchanges an impulse with restitution and
-Coulomb friction, applied with opposite signs to the projectile and to the
-bone's bodies, so momentum goes both ways. Boxes collide as their inscribed
-sphere (documented simplification) but carry their orientation and spin.
-The ground is the plane z = 0.
-"""
+"""Projectiles (heavy boxes and spheres) for the planar LOD: they fly in 3D
+under gravity at the force rate; a swept sphere-capsule test along each
+step's path finds their hits on bones, which exchange an impulse with
+restitution and Coulomb friction, both ways. Boxes collide as their
+inscribed sphere but carry orientation and spin; the ground is z = 0."""
 
 from __future__ import annotations
 

@@ -1,15 +1,8 @@
 """The planar LOD's stability rule and its diagnostics (docs/physics.md,
-"Stability").
-
-Chipmunk applies a DampedRotarySpring's torque once per step, explicitly,
-from the two bodies' own moments of inertia: a joint between bodies a and b
-rings at omega^2 = k (1/I_a + 1/I_b) and is stable only while omega h < 2.
-The rule I >= 2 k_max (h / s)^2 for every body (k_max the stiffest joint it
-touches, h the substep, s = quality.stability) keeps every joint at
-omega h <= s and a chain's zig-zag mode at sqrt(2) s < 2. It raises the
-rotary inertia of light, stiff bodies only; masses, and with them gravity,
-drag and the sway modes (carried by translation), are unchanged.
-"""
+"Stability"). Chipmunk applies a spring's torque explicitly, so a joint
+between bodies a and b, ringing at omega^2 = k (1/I_a + 1/I_b), is stable
+only while omega h < 2: the rule raises light, stiff bodies' rotary inertia
+(masses unchanged) until every joint has omega h <= s."""
 
 from __future__ import annotations
 
@@ -18,7 +11,8 @@ import numpy as np
 
 def inertia_floor(k_max: np.ndarray, h: float, s: float) -> np.ndarray:
     """Smallest stable rotary inertia (kg m^2) for bodies whose stiffest
-    joint is `k_max` (N m/rad), at substep `h` (s) and omega*h limit `s`."""
+    joint is `k_max` (N m/rad), at substep `h` (s) and omega*h limit `s`
+    (a chain's zig-zag mode then has sqrt(2) s < 2)."""
     return 2.0 * k_max * (h / s) ** 2
 
 

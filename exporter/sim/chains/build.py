@@ -128,12 +128,7 @@ class ChainBuild:
         reconstruction needs."""
         self.levels = []
         for depth in range(int(self.chain_depth.max()) + 1 if len(self.chain_depth) else 0):
-            rows = []
-            for ci in np.nonzero(self.chain_depth == depth)[0]:
-                bones = self.chain_bones[ci]
-                starts = [i for i, b in enumerate(bones) if self.row_start[b]]
-                for a, z in zip(starts, [*starts[1:], len(bones)]):
-                    rows.append(bones[a:z])
+            rows = [r for ci in np.nonzero(self.chain_depth == depth)[0] for r in self._rows(ci)]
             grid = np.full((len(rows), max(len(r) for r in rows)), -1, dtype=np.int64)
             for i, r in enumerate(rows):
                 grid[i, :len(r)] = r
@@ -154,6 +149,12 @@ class ChainBuild:
                 "head_arm": self.pivot0[heads] - self.pivot0[head_first],
                 "step": self.tip0[bones] - self.pivot0[bones]})
         self._refresh_cog()
+
+    def _rows(self, ci: int) -> list[np.ndarray]:
+        """Chain ci's rows, in order: it splits where a joint has broken."""
+        bones = self.chain_bones[ci]
+        starts = np.nonzero(self.row_start[bones])[0].tolist()
+        return [bones[a:z] for a, z in zip(starts, [*starts[1:], len(bones)])]
 
     def _refresh_cog(self) -> None:
         """Rest offsets of the lumped COGs (they change when a part breaks off)."""

@@ -299,12 +299,10 @@ class ChainForces:
         piece_of = np.full(self.n, -1)
         rows, group, piece = [], [], []
         for ci in self.root_chains:
-            bones = self.chain_bones[ci]
-            starts = np.nonzero(self.row_start[bones])[0]
-            for lo, hi in zip(starts, [*starts[1:], len(bones)], strict=True):
-                if self.pivot_alive[self.body_of[(int(bones[lo]), 0)]]:
+            for bones in self._rows(ci):
+                if self.pivot_alive[self.body_of[(int(bones[0]), 0)]]:
                     continue
-                mine = bones[lo:hi][~self.in_debris[bones[lo:hi]]]
+                mine = bones[~self.in_debris[bones]]
                 if not len(mine):
                     continue
                 index = int(piece_of.max()) + 1

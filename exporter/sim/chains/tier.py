@@ -1,21 +1,7 @@
 """The planar LOD's pymunk tier: each limb a 2D pymunk chain in its own
-bending planes (docs/physics.md, "The pymunk tier", has the design and the
-measurements behind each choice).
-
-- Chains: one body per bone and plane (`planes` = 1 or 2, perpendicular,
-  through the chain's chord; plane 0 holds the dominant horizontal load), a
-  `PivotJoint` at each junction, a `DampedRotarySpring` toward the rest angle
-  (prestressed: the grown shape is the equilibrium under gravity) and a
-  `RotaryLimitJoint` for the cone (build.py).
-- Coupling: a child chain moves in the frame of the bone it hangs on, under
-  d'Alembert forces of that frame; a body carries the chains on it as if
-  rigid (lumped; one-way, but for a free stem's recoil) (forces.py).
-- Stability: the rotary-inertia floor (stability.py), spring damping and
-  split steps (forces.py, "Stability").
-- Events: breaks, debris, felling and sleep (breaking.py, debris.py).
-- Cost: loads, frame forces and contacts are numpy on all bones at
-  `force_rate`, held between updates; bodies are read and written in bulk
-  (`pymunk.batch`); nothing loops over bodies in Python in the step.
+bending planes, built in build.py, rebuilt in 3D in kinematics.py, loaded in
+forces.py, broken in breaking.py; this module runs it frame by frame. The
+design and the measurements behind it: docs/physics.md, "The pymunk tier".
 """
 
 from __future__ import annotations
@@ -377,8 +363,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         (inf: wind, projectiles in the scene, pulls until their release)."""
         out = np.zeros(len(self.trees))
         for ti, tree in enumerate(self.trees):
-            m = tree.rig.model
-            lo, hi = m.bounds()
+            lo, hi = tree.rig.model.bounds()
             quiet = self.loads.quiet_after(0.5 * (lo + hi), 0.5 * float(np.linalg.norm(
                 hi[:2] - lo[:2])), float(hi[2]))
             for p in tree.pulls:
