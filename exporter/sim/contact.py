@@ -1,17 +1,12 @@
-"""Penalty contact with the ground plane z = 0, for explicit solvers.
+"""Penalty contact with the ground plane z = 0, for explicit solvers
+(docs/physics.md, "Ground").
 
 A contact point at depth d > 0 below its radius gets a normal force
 k d - c v_z (never pulling) and Coulomb friction against its sliding
-velocity. The spring-damper is tuned to the point's effective mass m_eff so
-that an update held for `dt` stays stable: omega = 0.5 / dt (omega dt = 0.5)
-and damping ratio 0.7, i.e. k = m_eff omega^2, c = 1.4 m_eff omega.
-
-The spring holds 1/2 k d d' while pressed in (`stored_energy`; d' the
-depth an update before): the energy audit counts it, as it counts the
-joints' springs, or a bounce that gives it back reads as energy made up.
-A point that starts deep (a limb that becomes debris where its chain's
-contact let it sink) is given that depth as an allowance (`Sunk`): the
-ground holds it there and pushes back only against further sinking, so a
+velocity, tuned to the point's effective mass m_eff so that an update held
+for `dt` stays stable: omega dt = 0.5, damping ratio 0.7. The energy audit
+counts what the spring holds (`stored_energy`). A point that starts deep
+(a sunk limb become debris) keeps that depth as an allowance (`Sunk`), so a
 change of model never fires a spring that nothing compressed.
 """
 
@@ -65,12 +60,9 @@ def stored_energy(points: np.ndarray, rise: np.ndarray, radius: np.ndarray,
     """Elastic energy (J) per point of ground_forces' springs at depth
     d = radius - z > 0 (m), the point rising at `rise` (m/s; its velocity's
     z): 1/2 k d d', with d' = d + rise dt its depth an update `dt` s before
-    (k as ground_forces sets it), not 1/2 k d^2. d d' is what an explicit
-    update's spring conserves: a point that falls into the ground within one
-    update is pushed only from the next, and 1/2 k d^2 counted it as stored
-    before any force did work on it (the audit read a landing sampled mid-
-    impact as a gain: 104 J out of nothing as a limb of 10 kg landed at
-    11 m/s)."""
+    (k as ground_forces sets it): what an explicit update's spring
+    conserves. (1/2 k d^2 counts a point that fell in within one update as
+    stored before any force did work on it: docs/physics.md, "Ground".)"""
     depth = np.maximum(radius - points[:, 2], 0.0)
     before = np.maximum(depth + rise * dt, 0.0)
     return 0.5 * _spring(mass, dt)[0] * depth * before

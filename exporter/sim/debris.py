@@ -1,11 +1,7 @@
-"""Parts broken off a tree: each moves on as one rigid body in 3D.
-
-A broken branch (and everything it carries) leaves its limb's moving frame
-and its chain; from the break on it is a rigid body with the momentum it
-had, falling under gravity, dragged by the air, and stopped by the ground
-(penalty contact at its bones' ends, contact.py) until it comes to rest and
-sleeps. All debris bodies are integrated together with numpy.
-"""
+"""Parts broken off a tree: each moves on as one rigid body in 3D, with the
+momentum it had, under gravity and air loads, stopped by the ground (penalty
+contact at its bones' ends, contact.py), until it comes to rest and sleeps.
+All debris bodies are integrated together with numpy."""
 
 from __future__ import annotations
 
@@ -18,6 +14,11 @@ from .rules import MAX_SPIN, SETTLE_TIME, floored_inertia
 MAX_STEP = 1 / 480  # s, the longest rigid-body step (a force update is split into these)
 ROLLING = 2.0  # 1/s, decay of spin while touching the ground (rolling resistance)
 SLEEP_SPEED = 0.02  # m/s and rad/s below which a grounded body may sleep
+
+
+def summed(index: np.ndarray, values: np.ndarray, n: int = 0) -> np.ndarray:
+    """The rows of `values` (N, 3) summed by `index`: (max(n, index + 1), 3)."""
+    return np.stack([np.bincount(index, values[:, k], minlength=n) for k in range(3)], 1)
 
 
 class Debris:
@@ -71,20 +72,12 @@ class Debris:
         momentum = (cross(d, m[:, None] * (v_b - v)) + spin).sum(0)
         i_body = floored_inertia(i_body)
         w = np.linalg.solve(i_body, momentum)
-        k = self.count
-        self.bones = np.concatenate([self.bones, bones])
-        self.owner = np.concatenate([self.owner, np.full(len(bones), k)])
-        self.rot0 = np.concatenate([self.rot0, rot])
-        self.arm_pivot = np.concatenate([self.arm_pivot, pose["pivot"][bones] - x])
-        self.x = np.vstack([self.x, x])
-        self.v = np.vstack([self.v, v])
-        self.r = np.concatenate([self.r, eye[None]])
-        self.w = np.vstack([self.w, w])
-        self.ang = np.vstack([self.ang, i_body @ w])
-        self.m = np.append(self.m, total)
-        self.i_body = np.concatenate([self.i_body, i_body[None]])
-        self.rest_time = np.append(self.rest_time, 0.0)
-        self.asleep = np.append(self.asleep, asleep)
+        new = {"bones": bones, "owner": np.full(len(bones), self.count), "rot0": rot,
+               "arm_pivot": pose["pivot"][bones] - x, "x": x[None], "v": v[None],
+               "r": eye[None], "w": w[None], "ang": (i_body @ w)[None], "m": [total],
+               "i_body": i_body[None], "rest_time": [0.0], "asleep": [asleep]}
+        for name, rows in new.items():
+            setattr(self, name, np.concatenate([getattr(self, name), rows]))
         if asleep:
             self.v[-1] = self.w[-1] = self.ang[-1] = 0.0
         # the part's chain touched the ground at its bones' tips only, with
@@ -94,15 +87,11 @@ class Debris:
         self.sunk_pivot.extend(self.radius[bones] - pivot[:, 2])
         self.sunk_tip.extend(self.radius[bones] - tip[:, 2])
 
-    def loads(self, force: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per-body force and torque about the body COM from per-bone forces
-        (debris bones' rows of solver arrays, in `self.bones` order) acting
-        at `com`."""
-        n = self.count
-        f = np.stack([np.bincount(self.owner, force[:, a], minlength=n) for a in range(3)], 1)
-        tq = cross(com - self.x[self.owner], force)
-        t = np.stack([np.bincount(self.owner, tq[:, a], minlength=n) for a in range(3)], 1)
-        return f, t
+    def _per_body(self, owner: np.ndarray, force: np.ndarray,
+                  arm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forces (N) at `arm` (m) from their `owner` bodies' COMs summed per
+        body, with their torques (N m) about the COM."""
+        return summed(owner, force, self.count), summed(owner, cross(arm, force), self.count)
 
     def impulse(self, row: int, impulse: np.ndarray, point: np.ndarray) -> None:
         """Apply a world impulse (N s) at a world point to the body of the
@@ -115,23 +104,27 @@ class Debris:
         self.asleep[k] = False
         self.rest_time[k] = 0.0
 
-    def bone_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Rotation (rel. rest), pivot, COM velocity and angular velocity of
-        every debris bone (in `self.bones` order)."""
+    def _placed(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every debris bone's rotation (rel. rest) and pivot (m)."""
         r = self.r[self.owner]
-        rot = compose(r, self.rot0)
-        pivot = self.x[self.owner] + apply(r, self.arm_pivot)
+        return compose(r, self.rot0), self.x[self.owner] + apply(r, self.arm_pivot)
+
+    def bone_poses(self) -> tuple[np.ndarray, ...]:
+        """Rotation (rel. rest), pivot, COM (m), COM velocity (m/s) and
+        angular velocity (rad/s) of every debris bone (`self.bones` order)."""
+        rot, pivot = self._placed()
         com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
         w = self.w[self.owner]
         vcom = self.v[self.owner] + cross(w, com - self.x[self.owner])
-        return rot, pivot, vcom, w
+        return rot, pivot, com, vcom, w
 
     def step(self, dt: float, loads) -> None:
         """Advance all bodies by `dt` s. `loads(com, vcom, axis, start, h)`
         gives the world force (N, gravity included) on each debris bone at
         its COM, held over the substep [start, start + h] s (from the step's
-        start); it and the ground contact are re-evaluated every substep (a
-        light leafy stick tumbling in a gale turns too fast for held loads)."""
+        start); it and the ground contact are re-evaluated every substep
+        (tumbling debris turns too fast for held loads: docs/physics.md,
+        "Breaking")."""
         if not self.count:
             return
         substeps = max(1, round(dt / MAX_STEP))
@@ -140,22 +133,17 @@ class Debris:
             awake = ~self.asleep
             if not awake.any():
                 return
-            rot, pivot, vcom, _ = self.bone_poses()
-            com = pivot + apply(rot, self.com0[self.bones] - self.pivot0[self.bones])
+            rot, _, com, vcom, _ = self.bone_poses()
             axis = apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
             axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
             bone_force = loads(com, vcom, axis, k * h, h)
             gravity = self.mass[self.bones, None] * self.g
-            # held over the substep: work = force x the COM's displacement,
-            # at the mean of its velocities before and after (exact for the
-            # step's constant force; the velocity before alone missed
-            # m a^2 h^2 / 2 per substep: 2 J per ms on a blasted sapling's
-            # ten broken twigs, pushed at 2000 m/s^2); the COM's arm from its
-            # body's is the step's start's
+            # the loads' work at the mean of the COM's velocities before and
+            # after the substep, exact for its constant force
             external = bone_force - gravity
-            arm = com - self.x[self.owner]
+            arm = com - self.x[self.owner]  # the step's start's
             self.work[self.bones] += 0.5 * (external * vcom).sum(1) * h
-            f, tq = self.loads(bone_force, com)
+            f, tq = self._per_body(self.owner, bone_force, arm)
             touching = np.zeros(self.count, dtype=bool)
             if self.ground:
                 cf, ct, touching = self._contact(h)
@@ -185,18 +173,14 @@ class Debris:
                 (np.linalg.norm(self.w, axis=1) < SLEEP_SPEED)
             self.rest_time = np.where(slow, self.rest_time + h, 0.0)
             newly = slow & (self.rest_time > SETTLE_TIME)
-            self.v[newly] = 0.0
-            self.w[newly] = 0.0
-            self.ang[newly] = 0.0
+            self.v[newly] = self.w[newly] = self.ang[newly] = 0.0
             self.asleep |= newly
 
     def _ends(self, shrink: bool = False):
         """Both ends of every debris bone (pivots, then tips), their owner
         bodies, contact radii (less their allowances; `shrink` updates
         those to the ends' present depths) and effective masses."""
-        r = self.r[self.owner]
-        rot = compose(r, self.rot0)
-        pivot = self.x[self.owner] + apply(r, self.arm_pivot)
+        rot, pivot = self._placed()
         tip = pivot + apply(rot, self.tip0[self.bones] - self.pivot0[self.bones])
         full = self.radius[self.bones]
         if shrink:
@@ -214,11 +198,9 @@ class Debris:
     def _share(self, ends, owner, radius, m_eff) -> np.ndarray:
         """Per end, the factor (<= 1) on its spring's mass that keeps the
         springs of all of its body's ends in the ground together no stiffer
-        than one spring tuned to the body's whole mass. Each end's spring
-        is stable alone; a limb lying along the ground touches it at many
-        ends at once, their stiffness adds up past what the substep holds,
-        and the limb bounces off faster than it landed (a 9.4 kg willow
-        limb: 11 -> 28 m/s)."""
+        than one spring tuned to the body's whole mass: each is stable alone,
+        but a limb lying along the ground touches at many ends at once, and
+        their stiffness adds up past what the substep holds ("Ground")."""
         down = radius - ends[:, 2] > 0
         pressed = np.bincount(owner, np.where(down, m_eff, 0.0), minlength=self.count)
         return np.minimum(1.0, self.m / np.maximum(pressed, 1e-12))[owner]
@@ -239,9 +221,5 @@ class Debris:
         vel = self.v[owner] + cross(self.w[owner], arm)
         self.contact_step = h
         f = ground_forces(ends, vel, radius, m_eff, h)
-        n = self.count
-        force = np.stack([np.bincount(owner, f[:, a], minlength=n) for a in range(3)], 1)
-        tq = cross(arm, f)
-        torque = np.stack([np.bincount(owner, tq[:, a], minlength=n) for a in range(3)], 1)
-        touching = np.bincount(owner, (f[:, 2] > 0).astype(float), minlength=n) > 0
-        return force, torque, touching
+        touching = np.bincount(owner, (f[:, 2] > 0).astype(float), minlength=self.count) > 0
+        return *self._per_body(owner, f, arm), touching

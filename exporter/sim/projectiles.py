@@ -1,20 +1,15 @@
-"""Projectiles (heavy boxes and spheres) for the planar LOD.
-
-They fly in 3D under gravity, integrated at the force rate. Contact with
-bones is a swept sphere-capsule test along each step's path (no tunnelling
-through thin branches); a hit exchanges an impulse with restitution and
-Coulomb friction, applied with opposite signs to the projectile and to the
-bone's bodies, so momentum goes both ways. Boxes collide as their inscribed
-sphere (documented simplification) but carry their orientation and spin.
-The ground is the plane z = 0.
-"""
+"""Projectiles (heavy boxes and spheres) for the planar LOD: they fly in 3D
+under gravity at the force rate; a swept sphere-capsule test along each
+step's path finds their hits on bones, which exchange an impulse with
+restitution and Coulomb friction, both ways. Boxes collide as their
+inscribed sphere but carry orientation and spin; the ground is z = 0."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..rotations import cross
 from ..model import TreeModel
+from ..rotations import cross
 from ..scene import Scene
 
 NEAR_MARGIN = 0.1  # m: what a hold's gravity and the bones' own motion may add
@@ -57,18 +52,18 @@ def bone_spheres(pose: dict, solver):
 
 
 class Projectiles:
-    def __init__(self, shapes, sizes, masses, positions, velocities, times, restitution,
-                 friction, frames: int):
-        self.shape = list(shapes)
-        self.size = np.asarray(sizes, dtype=float)
+    """The scene's projectiles: their flight, hits and the track per frame."""
+
+    def __init__(self, projectiles: list, frames: int):
+        def each(name: str) -> np.ndarray:
+            return np.array([getattr(x, name) for x in projectiles], dtype=float)
+
+        self.shape = [x.shape for x in projectiles]
+        self.size, self.mass, self.pos = each("size"), each("mass"), each("position")
         self.radius = self.size / 2
-        self.mass = np.asarray(masses, dtype=float)
-        self.pos = np.asarray(positions, dtype=float).copy()
         self.vel = np.zeros_like(self.pos)
-        self.launch_vel = np.asarray(velocities, dtype=float)
-        self.time = np.asarray(times, dtype=float)
-        self.e = np.asarray(restitution, dtype=float)
-        self.mu = np.asarray(friction, dtype=float)
+        self.launch_vel, self.time = each("velocity"), each("time")
+        self.e, self.mu = each("restitution"), each("friction")  # restitution, Coulomb
         self.launched = np.zeros(len(self.mass), dtype=bool)
         self.quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(self.mass), 1))
         self.spin = np.zeros_like(self.pos)
@@ -82,16 +77,17 @@ class Projectiles:
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Projectiles:
-        p = scene.projectiles
-        return cls([x.shape for x in p], [x.size for x in p], [x.mass for x in p],
-                   [x.position for x in p], [x.velocity for x in p], [x.time for x in p],
-                   [x.restitution for x in p], [x.friction for x in p], scene.frame_count)
+        """The scene's projectiles, tracked over its frames."""
+        return cls(scene.projectiles, scene.frame_count)
 
     def record(self, frame: int) -> None:
+        """Keep the pose at `frame`."""
         self.track_pos[frame] = self.pos
         self.track_quat[frame] = self.quat
 
     def advance(self, t: float, dt: float, pose: dict, solver) -> None:
+        """Launch those due at `t` s and fly every launched one over `dt` s:
+        hits on the solver's bones in `pose` (both ways), the ground, spin."""
         start = ~self.launched & (t >= self.time)
         self.vel[start] = self.launch_vel[start]
         self.launched |= start
@@ -137,10 +133,9 @@ class Projectiles:
     def _hit_bones(self, i, a, b, v, pose, solver):
         """Hits of projectile i on its path a -> b (m) at velocity v (m/s):
         every bone its sphere touches takes an impulse, nearest along the
-        path first, each against the velocity the ones before left it (a
-        box thrown into a sapling hits the stem behind the twigs: with one
-        contact per step the twigs in front shielded it, and a 60 kg box
-        passed through). Returns the path fraction of the first hit and the
+        path first, each against the velocity the ones before left it (with
+        one hit per step, twigs in front shielded the stem: docs/physics.md,
+        "Projectiles"). Returns the path fraction of the first hit and the
         velocity after all, or None."""
         piv, tip, mid, half = bone_spheres(pose, solver)
         reach = half + self.radius[i] + 0.5 * np.linalg.norm(b - a)
@@ -203,19 +198,17 @@ class Projectiles:
         vz = self.vel[i, 2]
         if vz < 0:
             self.vel[i, 2] = -self.e[i] * vz
-            vh = self.vel[i, :2]
-            speed = np.linalg.norm(vh)
-            if speed > 0:
-                dv = min(speed, self.mu[i] * (1 + self.e[i]) * -vz)
-                self.vel[i, :2] = vh - vh / speed * dv
-        # resting contact: friction and spin decay
-        if abs(self.vel[i, 2]) < 0.2:
-            vh = self.vel[i, :2]
-            speed = np.linalg.norm(vh)
-            if speed > 0:
-                dv = min(speed, self.mu[i] * gravity * dt)
-                self.vel[i, :2] = vh - vh / speed * dv
+            self._brake(i, self.mu[i] * (1 + self.e[i]) * -vz)
+        if abs(self.vel[i, 2]) < 0.2:  # resting contact: friction and spin decay
+            self._brake(i, self.mu[i] * gravity * dt)
             self.spin[i] *= 0.8
+
+    def _brake(self, i: int, most: float) -> None:
+        """Slow projectile i's horizontal velocity by at most `most` m/s."""
+        vh = self.vel[i, :2]
+        speed = np.linalg.norm(vh)
+        if speed > 0:
+            self.vel[i, :2] = vh - vh / speed * min(speed, most)
 
 
 def projectile_reaches(scene: Scene, model: TreeModel) -> bool:

@@ -28,40 +28,43 @@ class ChainEvents:
     """Breaks, felling, debris and sleep (mixed into PymunkTier)."""
 
     def check_breaks(self, t: float, pose: dict) -> None:
-        """Break every joint whose bending moment exceeds its strength: the
-        spring's moment in each plane, plus the cone limit's when engaged."""
+        """Break every joint whose bending moment exceeds its strength."""
         cand = np.nonzero(self.breakable)[0]
         if not len(cand):
             return
-        moment, rel = self._spring_moments(cand)
-        at_limit = np.abs(rel) > 0.98 * self.cone[self.body_bone[cand]]
-        for i in np.nonzero(at_limit)[0]:
-            limit = self.joints[cand[i]][LIMIT]
-            if limit is not None:
-                moment[i] += math.copysign(limit.impulse / self.h, moment[i])
-        bones = self.body_bone[cand]
-        total = np.sqrt(np.bincount(bones, moment * moment, minlength=self.n))
+        total = self.joint_moments(cand, limits=True)
         over = np.nonzero(past_strength(total, self.strength) & self.joint_alive
                           & ~self.in_debris)[0]
         for b in over:
             if self.joint_alive[b] and not self.in_debris[b]:
                 self.break_joint(int(b), t, pose, float(total[b]))
 
-    def _spring_moments(self, bodies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The spring moments (N m) at these bodies' joints, each in its
-        plane, and the joints' angles from their rest (rad)."""
+    def joint_moments(self, bodies: np.ndarray | None = None, limits: bool = False) -> np.ndarray:
+        """Each bone's joint's bending moment (B,) N m: the root sum square
+        of its springs' in the planes of `bodies` (None: all), each with its
+        cone limit's (impulse / h) where engaged if `limits`."""
+        bodies = np.arange(len(self.body_bone)) if bodies is None else bodies
         s = self.state
         j = self.prev_body[bodies]
         rel = s[bodies, 2] - np.where(j >= 0, s[np.maximum(j, 0), 2], 0.0)
-        return self.k[self.body_bone[bodies]] * (rel + self.rest[bodies]), rel
+        moment = self.k[self.body_bone[bodies]] * (rel + self.rest[bodies])
+        if limits:
+            at_limit = np.abs(rel) > 0.98 * self.cone[self.body_bone[bodies]]
+            for i in np.nonzero(at_limit)[0]:
+                limit = self.joints[bodies[i]][LIMIT]
+                if limit is not None:
+                    moment[i] += math.copysign(limit.impulse / self.h, moment[i])
+        return np.sqrt(np.bincount(self.body_bone[bodies], moment * moment, minlength=self.n))
 
-    def joint_moments(self) -> np.ndarray:
-        """Each bone's joint's bending moment (B,) N m from its springs in
-        every plane (a cone limit's share aside: see check_breaks)."""
-        moment, _ = self._spring_moments(np.arange(len(self.body_bone)))
-        return np.sqrt(np.bincount(self.body_bone, moment * moment, minlength=self.n))
+    def _detach(self, body: int, remove: bool = False) -> None:
+        """Take a body's joints out (and, `remove`, the body): it breaks no more."""
+        self._remove_joint(body)
+        self.breakable[body] = False
+        if remove and self.in_space[body]:
+            self.space.remove(self.bodies[body])
 
     def _remove_joint(self, body: int, which: tuple[int, ...] = (PIVOT, SPRING, LIMIT)) -> None:
+        """Take these of a body's joint constraints out of the space."""
         if PIVOT in which:
             self.pivot_alive[body] = False
         for w in which:
@@ -71,13 +74,11 @@ class ChainEvents:
                 self.joints[body][w] = None
 
     def break_joint(self, bone: int, t: float, pose: dict, moment: float) -> None:
-        """Remove the joint at a bone's base. In a root chain the part above
-        falls on as a free planar chain; elsewhere, and when a stem's top
-        lighter than LIGHT_PIECE of its tree breaks off, the broken-off part
-        (with everything it carries) becomes rigid debris. (A light top
-        tumbles fast: as a planar chain it would split the whole space's
-        steps for its spin, 1.4x the CPU of the `hurricane` preset, for a
-        bending that no longer shows.)"""
+        """Remove the joint at a bone's base (`moment` N m broke it). In a
+        root chain the part above falls on as a free planar chain; elsewhere,
+        or if lighter than LIGHT_PIECE of its tree (a light top tumbles, and
+        its spin would split the whole space's steps: "Breaking"), the part
+        with all it carries becomes rigid debris."""
         self.joint_alive[bone] = False
         self.events.append(break_event(t, self.locate(bone)[0], self.bone_path(bone),
                                        self.parent[bone] < 0, moment, self.strength[bone]))
@@ -90,37 +91,30 @@ class ChainEvents:
         light = self.parent[bone] >= 0 and self.mass[freed].sum() < LIGHT_PIECE * tree_mass
         if self.bone_frame[bone] < 0 and not light:
             for k in range(self.planes_of_bone[bone]):
-                i = self.body_of[(bone, k)]
-                self._remove_joint(i)
-                self.breakable[i] = False
+                self._detach(self.body_of[(bone, k)])
             self.row_start[bone] = True
             self._layout()
-            self._fall_plane(self.chain_bones[self.bone_chain[bone]][freed[
-                self.chain_bones[self.bone_chain[bone]]]])
+            chain = self.chain_bones[self.bone_chain[bone]]
+            self._fall_plane(chain[freed[chain]])
         else:
             self._to_debris(freed, pose)
         self._unload(freed)
 
     def _free_rigid_motion(self, root: int, planes: tuple[int, ...] = (0, 1)) -> None:
         """A root chain whose root joint is cut or gone turns freely as a
-        whole: its structural damping acts relative to that turn (forces.py)."""
+        whole (`planes`): damping acts relative to that turn (forces.py)."""
         for b in self.chain_bones[self.bone_chain[root]]:
             for k in planes:
                 if k < self.planes_of_bone[b]:
                     self.rigid_root[self.body_of[(int(b), k)]] = self.body_of[(root, k)]
 
     def _fall_plane(self, bones: np.ndarray) -> None:
-        """A stem that falls free turns through a large angle: two planes
-        only combine small rotations, so from here it moves in its first
-        plane (the load's, or the felling direction) alone; the small
-        deflection it had in the other plane is dropped."""
+        """A stem falling free turns far, and two planes only combine small
+        rotations: from here `bones` move in their first plane alone."""
         for b in bones:
             for k in range(1, self.planes_of_bone[b]):
                 i = self.body_of[(int(b), k)]
-                self._remove_joint(i)
-                self.breakable[i] = False
-                if self.in_space[i]:
-                    self.space.remove(self.bodies[i])
+                self._detach(i, remove=True)
                 self.state[i] = [*self.q0[i], 0.0, 0.0, 0.0, 0.0]
             self.planes_of_bone[b] = 1
         b0, b1, _ = self.plane_rows
@@ -130,8 +124,7 @@ class ChainEvents:
         self._buffers()
 
     def _outboard(self, bone: int) -> np.ndarray:
-        """A bone and every bone it carries (later in its chain, and their
-        attached chains)."""
+        """A bone and every bone it carries (later in its chain, and theirs)."""
         freed = np.zeros(self.n, dtype=bool)
         freed[bone] = True
         chain = self.chain_bones[self.bone_chain[bone]]
@@ -142,38 +135,38 @@ class ChainEvents:
         return freed
 
     def _to_debris(self, freed: np.ndarray, pose: dict, asleep: bool = False) -> None:
+        """The `freed` bones not yet debris become one rigid debris body,
+        moving as in `pose` (or `asleep`); their bodies leave the space."""
         bones = np.nonzero(freed & ~self.in_debris)[0]
         self.debris.add(bones, pose, asleep)
         self.in_debris[bones] = True
         self.stats.debris += 1
         for b in bones:
             for k in range(self.planes_of_bone[b]):
-                i = self.body_of[(int(b), k)]
-                self._remove_joint(i)
-                self.breakable[i] = False
-                if self.in_space[i]:
-                    self.space.remove(self.bodies[i])
+                self._detach(self.body_of[(int(b), k)], remove=True)
         self._buffers()
 
     def _unload(self, freed: np.ndarray) -> None:
-        """The freed part no longer loads the chains it hung on: drop it from
-        their lumps and load pairs."""
+        """Drop the `freed` part from the lumps and load pairs of the chains
+        it hung on."""
         keep = ~(freed[self.pair_dsc] & ~freed[self.pair_anc])
         changed = np.unique(self.pair_anc[~keep])
         self.pair_anc, self.pair_dsc = self.pair_anc[keep], self.pair_dsc[keep]
         self.pair_weight = self.pair_weight[keep]
+        self._relump_all(changed)
+
+    def _relump_all(self, changed: np.ndarray) -> None:
+        """Lump again, and give the `changed` bones' bodies their new lumps."""
         self._lump()
         for a in changed:
             self._relump(int(a))
         self._refresh_cog()
 
     def settle(self, t: float, pose: dict, dt: float) -> None:
-        """Put trees at rest to sleep, as one sleeping rigid body each: a
-        fallen tree (stem off its root) slower than SETTLE_SPEED for
-        SETTLE_TIME (lying on the ground it would keep the solver at contact
-        rate), and a standing one slower than STILL_SPEED once no load that
-        changes will reach it again (after a blast, a pull, a passing gust
-        front)."""
+        """Put trees at rest to sleep as one sleeping rigid body each, after
+        SETTLE_TIME below SETTLE_SPEED if fallen (on the ground it keeps the
+        updates at every substep), or below STILL_SPEED if standing once no
+        changing load reaches it (quiet: `_quiet_times`)."""
         for ti in range(len(self.trees)):
             bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
             awake = bones[~self.in_debris[bones]]
@@ -199,8 +192,7 @@ class ChainEvents:
 
     def _nudge(self, root: int, w: float) -> None:
         """Turn a root chain (plane 0) as one rigid body about its pivot at
-        `w` rad/s (negative tips the top toward +e): every body gets the
-        velocity of that rotation, so the push is not undone by the joints."""
+        `w` rad/s (negative tips it toward +e), so no joint undoes the push."""
         pivot = self.bodies[self.body_of[(root, 0)]].position
         for b in self.chain_bones[self.bone_chain[root]]:
             body = self.bodies[self.body_of[(int(b), 0)]]
@@ -209,18 +201,14 @@ class ChainEvents:
             body.velocity = (-w * (cog.y - pivot.y), w * (cog.x - pivot.x))
 
     def _rigid_lumps(self, tree: int) -> None:
-        """A falling tree turns as one body, not about its sway frequency: its
-        children's apparent mass (a sway quantity) gives way to plain rigid
-        lumping, or the fall would be slowed by their extra inertia."""
+        """A falling tree turns as one body: its chains are lumped as rigid
+        (apparent mass is a sway quantity, and would slow the fall)."""
         lo, hi = self.offsets[tree], self.offsets[tree + 1]
         mine = (self.pair_anc >= lo) & (self.pair_anc < hi)
         if not mine.any() or np.all(self.pair_weight[mine] == 1.0):
             return
         self.pair_weight = np.where(mine, 1.0, self.pair_weight)
-        self._lump()
-        for a in np.unique(self.pair_anc[mine]):
-            self._relump(int(a))
-        self._refresh_cog()
+        self._relump_all(np.unique(self.pair_anc[mine]))
 
     def _kinetic(self, tree: int) -> float:
         """Kinetic energy (J) of a tree's bones, from the bodies' state."""
@@ -238,18 +226,15 @@ class ChainEvents:
             cut = tree.cut
             if cut is None:
                 continue
-            roots = [int(self.chain_bones[ci][0]) for ci in range(len(self.chain_bones))
-                     if self.chain_tree[ci] == ti and self.chain_parent[ci] < 0]
+            roots = [int(self.chain_bones[ci][0]) for ci in self.root_chains
+                     if self.chain_tree[ci] == ti]
             state = self.cut_state.get(ti, Felling.STANDING)
             if state is Felling.STANDING and t >= cut.time:
                 self.read()
                 before = self._kinetic(ti)
                 self._rigid_lumps(ti)
-                for b in roots:
-                    # plane 0 contains the felling direction: the notch frees
-                    # it; sideways (plane 1) the hinge wood still holds
-                    i = self.body_of[(b, 0)]
-                    self._remove_joint(i, (SPRING, LIMIT))
+                for b in roots:  # the notch frees plane 0 (felling); the hinge holds plane 1
+                    self._remove_joint(self.body_of[(b, 0)], (SPRING, LIMIT))
                     for k in range(self.planes_of_bone[b]):
                         self.breakable[self.body_of[(b, k)]] = False
                     self._nudge(b, -FELL_NUDGE)  # (pymunk's angles: negative tips it over)

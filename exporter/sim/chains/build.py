@@ -5,7 +5,6 @@ and the stability rule (stability.py)."""
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import fields
 
 import numpy as np
@@ -19,25 +18,17 @@ from ..stability import inertia_floor
 
 EYE = np.eye(3)
 PIVOT, SPRING, LIMIT = 0, 1, 2  # a body's joint constraints
-# The springs' damping is c = k h_c / 2 with h_c the substep or this step
-# (s), whichever is longer. That damps a mode of f Hz by zeta = pi f h_c / 2, as
-# the reference's discrete step of 1/2000 s does (pi f h): the twigs' modes
-# have no other damping to speak of, and one-way coupling lets a parent
-# drive a twig at resonance without losing what it gives, so a damping that
-# shrank with the step made finer levels break and gain more, not less
-# (docs/physics.md, "Spring damping")
+# s: the springs' damping is c = k h_c / 2, h_c the substep or this if longer: the
+# twigs' only damping, which a finer step must not lessen ("Spring damping")
 SPRING_DAMPING_STEP = 1 / 1000
 
 
 def apparent_mass(r: float, zeta: float) -> float:
-    """The in-phase (real) part of the apparent mass of a damped oscillator
-    driven at its base, per unit of its mass, at r = driving frequency /
-    its own frequency: ((1 - r^2) + 4 zeta^2 r^2) / ((1 - r^2)^2 + 4 zeta^2 r^2),
-    clipped to [1, 3]. Above 1 when the child is stiffer than the motion (it
-    sways along, amplified): the one-way coupling's stand-in for the
-    children's push back. A softer child would lag behind (below 1), but
-    its frequency estimate ignores gravity's pendulum stiffness (hanging
-    twigs), so it is carried as rigid instead."""
+    """The in-phase apparent mass, per unit mass, of a damped oscillator
+    driven at its base at r = driving / own frequency, clipped to [1, 3]: a
+    stiffer child sways along, amplified (the one-way coupling's stand-in
+    for its push back); a softer one is carried as rigid (its frequency
+    estimate ignores gravity's pendulum stiffness)."""
     q = 1.0 - r * r
     z = 4.0 * zeta * zeta * r * r
     return float(np.clip((q + z) / (q * q + z), 1.0, 3.0))
@@ -56,16 +47,16 @@ class ChainBuild:
 
     def _chains(self) -> None:
         """Each rig limb is a chain (layout.py) with one or two bending planes."""
-        lay = self.layout = ChainLayout.of(self.trees, self.offsets, self.pivot0, self.tip0)
+        lay = ChainLayout.of(self.trees, self.offsets, self.pivot0, self.tip0)
         self.chain_bones = lay.chain_bones
         self.chain_parent = lay.chain_parent.tolist()  # the bone a chain hangs on, -1 = ground
         self.chain_tree = lay.chain_tree.tolist()
+        self.chain_depth = lay.chain_depth
         self.chain_planes = []  # (e, d) per plane
         for ci, (e, d) in enumerate(zip(lay.chain_e, lay.chain_d)):
             planes = self.trees[self.chain_tree[ci]].planes
             self.chain_planes.append([(e, d)] if planes == 1 else [(e, d), (cross(e, d), d)])
         self.bone_chain = lay.bone_chain
-        self.chain_parent_arr = lay.chain_parent
         self.chain_first = lay.chain_first
         self.bone_frame = lay.bone_frame  # the bone whose frame a bone's chain moves in
         self.top_stem = np.arange(self.n)  # the stem bone (root chain) a bone hangs on
@@ -73,14 +64,14 @@ class ChainBuild:
             if self.bone_frame[b] >= 0:
                 self.top_stem[b] = self.top_stem[self.bone_frame[b]]
         self.root_chains = [ci for ci, p in enumerate(self.chain_parent) if p < 0]
+        self.row_start = np.zeros(self.n, dtype=bool)  # a bone starts a row (_layout)
+        self.row_start[self.chain_first] = True
 
     def _lumping(self) -> None:
         """Lumped bodies: a bone plus the chains attached to it, carried as
         if rigid. Each pair (attach bone a, descendant d) adds d to a's lump:
-        its true mass for gravity and the prestress; for inertia, its mass
-        times the apparent-mass factor of the child chain it hangs in
-        (apparent_mass), so a soft crown slows the stem as it does when it
-        sways along."""
+        its true mass for gravity and the prestress, and for inertia its
+        mass times its child chain's apparent_mass factor."""
         omega = np.concatenate([t.rig.limb_omega for t in self.trees]) if self.trees else \
             np.zeros(0)
         zeta = self.alpha[self.chain_first] / np.maximum(2 * omega, 1e-9)
@@ -102,7 +93,6 @@ class ChainBuild:
         self.pair_anc = np.asarray(anc, dtype=np.int64)[order]
         self.pair_dsc = np.asarray(dsc, dtype=np.int64)[order]
         self.pair_weight = factor[np.asarray(via, dtype=np.int64)[order]] if anc else np.zeros(0)
-        self.chain_factor = factor
         self._lump()
 
     def _lump(self) -> None:
@@ -132,28 +122,13 @@ class ChainBuild:
         self.lump_inertia = lj - lm[:, None, None] * (
             (g * g).sum(1)[:, None, None] * EYE - g[:, :, None] * g[:, None, :])
 
-    def _levels(self) -> None:
-        """Chains grouped by depth, for the 3D reconstruction level by level."""
-        depth = []
-        for p in self.chain_parent:
-            depth.append(0 if p < 0 else depth[self.bone_chain[p]] + 1)
-        self.chain_depth = np.asarray(depth, dtype=np.int64)
-        self.row_start = np.zeros(self.n, dtype=bool)  # a bone starts a (sub)chain row
-        self.row_start[self.chain_first] = True
-        self._layout()
-
     def _layout(self) -> None:
-        """Per depth, a padded grid (rows x length) of sub-chains (a chain
-        splits into rows where a joint has broken), and the rest-pose
-        quantities the reconstruction needs, computed once."""
+        """Per chain depth, a padded grid (rows x length) of rows (a chain
+        splits where a joint has broken) and the rest-pose quantities the
+        reconstruction needs."""
         self.levels = []
         for depth in range(int(self.chain_depth.max()) + 1 if len(self.chain_depth) else 0):
-            rows = []
-            for ci in np.nonzero(self.chain_depth == depth)[0]:
-                bones = self.chain_bones[ci]
-                starts = [i for i, b in enumerate(bones) if self.row_start[b]]
-                for a, z in zip(starts, [*starts[1:], len(bones)]):
-                    rows.append(bones[a:z])
+            rows = [r for ci in np.nonzero(self.chain_depth == depth)[0] for r in self._rows(ci)]
             grid = np.full((len(rows), max(len(r) for r in rows)), -1, dtype=np.int64)
             for i, r in enumerate(rows):
                 grid[i, :len(r)] = r
@@ -175,6 +150,12 @@ class ChainBuild:
                 "step": self.tip0[bones] - self.pivot0[bones]})
         self._refresh_cog()
 
+    def _rows(self, ci: int) -> list[np.ndarray]:
+        """Chain ci's rows, in order: it splits where a joint has broken."""
+        bones = self.chain_bones[ci]
+        starts = np.nonzero(self.row_start[bones])[0].tolist()
+        return [bones[a:z] for a, z in zip(starts, [*starts[1:], len(bones)])]
+
     def _refresh_cog(self) -> None:
         """Rest offsets of the lumped COGs (they change when a part breaks off)."""
         arm = self.lump_cog0 - self.pivot0
@@ -182,25 +163,36 @@ class ChainBuild:
             level["cog_arm"] = arm[level["bones"]]
 
     def _space(self) -> None:
-        """pymunk bodies and joints, rest angles (prestress), stability rule."""
-        q, h = self.quality, self.h
-        space = pymunk.Space()
-        space.iterations = q.iterations
-        self.space = space
-        body_bone, body_plane, e_rows, d_rows = [], [], [], []
+        """The bodies, their rest angles (prestress) and inertias (the
+        stability rule), and the pymunk space that steps them."""
+        self._bodies()
+        nb = len(self.body_bone)
+        self.rest = self._prestress() if self.scene.prestress else np.zeros(nb)
+        self._floor_inertia()
+        self._fill_space()
+        self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
+        # N s, N s, N m s not yet delivered: projectiles' hits, a free stem's recoil (forces.py)
+        self.hit_impulse = np.zeros((nb, 3))
+        self._buffers()
+
+    def _bodies(self) -> None:
+        """One body per bone and plane, a chain plane's in chain order: its
+        bone, the body before it (-1: the anchor), plane axes e, d, normal
+        n, rest pivot `q0` and lumped COG `cog2d0` in its plane (m) and
+        rotary inertia `i_n` about n (kg m^2)."""
         self.body_of: dict[tuple[int, int], int] = {}
+        body_bone, prev, e_rows, d_rows = [], [], [], []
         for ci, bones in enumerate(self.chain_bones):
             for k, (e, d) in enumerate(self.chain_planes[ci]):
-                for b in bones:
+                for j, b in enumerate(bones):
                     self.body_of[(int(b), k)] = len(body_bone)
+                    prev.append(len(body_bone) - 1 if j else -1)
                     body_bone.append(int(b))
-                    body_plane.append(k)
                     e_rows.append(e)
                     d_rows.append(d)
-        nb = len(body_bone)
-        self.stats.bodies = nb
+        nb = self.stats.bodies = len(body_bone)
         self.body_bone = np.asarray(body_bone, dtype=np.int64)
-        self.body_plane = np.asarray(body_plane, dtype=np.int64)
+        self.prev_body = np.asarray(prev, dtype=np.int64)
         self.body_e = np.asarray(e_rows).reshape(nb, 3)
         self.body_d = np.asarray(d_rows).reshape(nb, 3)
         self.body_n = cross(self.body_e, self.body_d)
@@ -209,60 +201,53 @@ class ChainBuild:
                                         dtype=np.int64)
         b1 = np.asarray([self.body_of.get((b, 1), -1) for b in range(self.n)], dtype=np.int64)
         self.plane_rows = (self.body_of_bone0, b1, np.nonzero(b1 >= 0)[0])
-        first = self.chain_first[self.bone_chain[self.body_bone]]
-        origin = self.pivot0[first]  # a chain's 2D origin: its base at rest
-
-        def to2d(p):
-            return np.stack([((p - origin) * self.body_e).sum(1),
-                             ((p - origin) * self.body_d).sum(1)], 1)
-
-        self.q0 = to2d(self.pivot0[self.body_bone])
-        self.cog2d0 = to2d(self.lump_cog0[self.body_bone])
-        lm = self.lump_mass[self.body_bone]
+        self.q0 = self._in_planes(self.pivot0[self.body_bone])
+        self.cog2d0 = self._in_planes(self.lump_cog0[self.body_bone])
         self.i_n = np.einsum("bi,bij,bj->b", self.body_n, self.lump_inertia[self.body_bone],
                              self.body_n)
-        prev = np.full(nb, -1, dtype=np.int64)
-        for ci, bones in enumerate(self.chain_bones):
-            for k in range(len(self.chain_planes[ci])):
-                for a, b in itertools.pairwise(bones):
-                    prev[self.body_of[(int(b), k)]] = self.body_of[(int(a), k)]
-        self.prev_body = prev
-        self.rest = self._prestress() if self.scene.prestress else np.zeros(nb)
-        # stability rule: floor each body's rotary inertia by its stiffest joint
+
+    def _in_planes(self, points: np.ndarray) -> np.ndarray:
+        """World points (one per body) in the bodies' planes (N, 2), m."""
+        origin = self.pivot0[self.chain_first[self.bone_chain[self.body_bone]]]
+        return np.stack([((points - origin) * self.body_e).sum(1),
+                         ((points - origin) * self.body_d).sum(1)], 1)
+
+    def _floor_inertia(self) -> None:
+        """The stability rule: `i_eff`, each body's rotary inertia raised to
+        the inertia_floor of the stiffest joint it touches."""
+        prev = self.prev_body
         kb = self.k[self.body_bone]
         k_max = kb.copy()
         has = prev >= 0
         np.maximum.at(k_max, prev[has], kb[has])
-        floor = inertia_floor(k_max, h, q.stability)
+        floor = inertia_floor(k_max, self.h, self.quality.stability)
         self.i_eff = np.maximum(np.maximum(self.i_n, floor), 1e-12)
-        floored = floor > self.i_n
-        self.stats.inertia_floored = int(floored.sum())
+        self.stats.inertia_floored = int((floor > self.i_n).sum())
         self.stats.max_inertia_ratio = float(
-            (self.i_eff / np.maximum(self.i_n, 1e-12)).max()) if nb else 1.0
-        # damping: c = k h_c / 2 on the springs (SPRING_DAMPING_STEP);
-        # mass-proportional alpha as an exact exponential decay over a force
-        # interval
-        c = 0.5 * max(h, SPRING_DAMPING_STEP) * kb
+            (self.i_eff / np.maximum(self.i_n, 1e-12)).max()) if len(prev) else 1.0
+
+    def _fill_space(self) -> None:
+        """The pymunk space: each body at rest, joined to the one before it
+        (or the anchor) by a pivot, a damped spring and a cone limit."""
+        q, h = self.quality, self.h
+        space = self.space = pymunk.Space()
+        space.iterations = q.iterations
+        c = 0.5 * max(h, SPRING_DAMPING_STEP) * self.k[self.body_bone]  # N m s/rad
         self.body_alpha = self.alpha[self.body_bone]
-        self.body_mass = lm
-        # Chipmunk corrects 10 % of a joint's position error per 1/60 s by
-        # default; fast spins drift pivots apart faster (the velocity
-        # constraint is linear), so correct a fraction per substep instead
+        self.body_mass = self.lump_mass[self.body_bone]
+        # a share of a joint's error per substep, not Chipmunk's per 1/60 s: fast spins drift
         error_bias = (1.0 - q.joint_correction) ** (1.0 / h)
         self.bodies: list[pymunk.Body] = []
         self.joints: list[list] = []
-        static = space.static_body
-        for i in range(nb):
-            body = pymunk.Body(float(lm[i]), float(self.i_eff[i]))
-            # the centre of gravity first: Chipmunk keeps the COG's world
-            # position when it is set, so setting it after the position
-            # would move the body's origin (the pivot) by -cog
+        for i, b in enumerate(self.body_bone.tolist()):
+            body = pymunk.Body(float(self.body_mass[i]), float(self.i_eff[i]))
+            # the COG first: setting it keeps its world position, moving the origin
             body.center_of_gravity = tuple((self.cog2d0[i] - self.q0[i]).tolist())
             body.position = tuple(self.q0[i].tolist())
             space.add(body)
             self.bodies.append(body)
-            other = self.bodies[prev[i]] if prev[i] >= 0 else static
-            b = int(self.body_bone[i])
+            other = self.bodies[self.prev_body[i]] if self.prev_body[i] >= 0 else \
+                space.static_body
             pivot = pymunk.PivotJoint(other, body, tuple(self.q0[i].tolist()))
             spring = pymunk.DampedRotarySpring(other, body, float(self.rest[i]), float(self.k[b]),
                                                float(c[i]))
@@ -271,23 +256,15 @@ class ChainBuild:
             pivot.error_bias = limit.error_bias = error_bias
             space.add(pivot, spring, limit)
             self.joints.append([pivot, spring, limit])
-        self.state = np.zeros((nb, 6))  # x, y, angle, vx, vy, w (pymunk's own order)
-        # N s, N s, N m s not yet delivered: projectiles' hits, a free stem's recoil (forces.py)
-        self.hit_impulse = np.zeros((nb, 3))
-        self._buffers()
 
     def _prestress(self) -> np.ndarray:
-        """Spring rest angles that hold every chain in its grown shape under
-        gravity: each joint's rest angle is the gravity torque of everything
-        outboard of it (lumped) over k. DampedRotarySpring drives
-        (a.angle - b.angle) to the rest angle, a being the previous body."""
+        """Spring rest angles (rad) that hold every chain in its grown shape
+        under gravity: the gravity torque of everything outboard of a joint
+        over its k (DampedRotarySpring drives a.angle - b.angle to it)."""
         g = self.loads.g
         rest = np.zeros(len(self.body_bone))
         g2d = np.stack([self.body_e @ g, self.body_d @ g], 1)
-        first = self.chain_first[self.bone_chain[self.body_bone]]
-        origin = self.pivot0[first]
-        rel = self.true_cog0[self.body_bone] - origin
-        cog2d = np.stack([(rel * self.body_e).sum(1), (rel * self.body_d).sum(1)], 1)
+        cog2d = self._in_planes(self.true_cog0[self.body_bone])
         lm = self.true_mass[self.body_bone]
         for ci, bones in enumerate(self.chain_bones):
             for k in range(len(self.chain_planes[ci])):
@@ -337,9 +314,8 @@ class ChainBuild:
             self.body_mass[i] = total
             body.mass = float(total)
             body.moment = float(self.i_eff[i])
-            # setting the COG moves the origin: restore it. pymunk's velocity
-            # is the COG's, so the new COG's must be what the wood there had
-            # (v + omega x shift), or the break would jolt what stays
+            # keep the origin, and give the new COG the velocity the wood there
+            # had (pymunk's is the COG's), or the break would jolt what stays
             origin, before = body.position, body.local_to_world(body.center_of_gravity)
             body.center_of_gravity = tuple((c2 - self.q0[i]).tolist())
             self.cog2d0[i] = c2  # what _cogs reads (damping, hits, velocities)

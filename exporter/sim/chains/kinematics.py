@@ -13,11 +13,14 @@ from ..common import MAX_ANGULAR_SPEED
 from ..stability import chain_gaps
 from .build import EYE
 
+POSE_KEYS = ("rot", "pivot", "cog", "vcog", "vec", "omega", "frame_rot", "attach")
+
 
 class ChainKinematics:
     """Reading state and reconstructing poses (mixed into PymunkTier)."""
 
     def read(self) -> None:
+        """The live bodies' (x, y, angle, vx, vy, w) from pymunk into `state`."""
         self.read_buf.clear()
         batch.get_space_bodies(self.space, batch.BodyFields.POSITION | batch.BodyFields.ANGLE
                                | batch.BodyFields.VELOCITY | batch.BodyFields.ANGULAR_VELOCITY,
@@ -26,15 +29,40 @@ class ChainKinematics:
         self.state[self.in_space] = rows[self.live_rows]
 
     def reconstruct(self) -> dict:
-        """3D pose and velocity of every bone from the 2D chains, level by
-        level from the roots (children ride on their parents); debris bones
-        from their rigid bodies."""
-        n, s = self.n, self.state
+        """Every bone's 3D pose and velocity from `state`: rotation relative
+        to rest (B, 3, 3), pivot, lumped COG and COM (m), their velocities
+        (m/s), angular velocity (rad/s), pivot-to-tip vector (m), the frame
+        its chain moves in (rotation, attachment point); the chains level by
+        level from the roots, debris bones from their rigid bodies."""
+        n = self.n
+        own, wrel, off, voff = self._bends()
+        p = {k: np.empty((n, 3, 3) if k in ("rot", "frame_rot") else (n, 3)) for k in POSE_KEYS}
+        for lv in self.levels:
+            rp, step, piv = self._level_pose(lv, own, off, p)
+            self._level_velocity(lv, rp, step, piv, wrel, voff, p)
+        if self.debris.count:
+            d = self.debris.bones
+            p["rot"][d], p["pivot"][d], _, vcom_d, p["omega"][d] = self.debris.bone_poses()
+            p["frame_rot"][d] = EYE
+            p["vec"][d] = apply(p["rot"][d], self.tip0[d] - self.pivot0[d])
+        p["com"] = p["pivot"] + apply(p["rot"], self.com0 - self.pivot0)
+        p["vcom"] = p["vcog"] + cross(p["omega"], p["com"] - p["cog"])
+        if self.debris.count:
+            p["vcom"][d] = vcom_d
+            p["vcog"][d] = vcom_d  # debris bones carry no lumped children
+            p["cog"][d] = p["com"][d]
+        return p
+
+    def _bends(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per bone, from its bodies in each plane: its rotation in its frame
+        (B, 3, 3), exp(rho) with rho = theta_0 n_0 (+ theta_1 n_1); its
+        angular velocity there, J(rho) rho' (rho' alone is that rate only
+        while the turn keeps its direction: "Planes"); its pivot's offset
+        from rest and that offset's velocity in its frame (m, m/s; the axial
+        part, simulated in every plane, averaged). A body's position is its
+        origin (the pivot), its velocity its COG's."""
+        s = self.state
         b0, b1, two = self.plane_rows
-        # plane 0 of every bone, plus plane 1 where a bone has one; the axial
-        # (d) part is simulated in every plane: average it. A body's
-        # position is its origin (the pivot) and its velocity its centre of
-        # gravity's: the origin moves at v - w x (cog - origin)
         disp = s[:, 0:2] - self.q0
         arm = self._cogs(np.arange(len(s))) - s[:, 0:2]
         v_origin = s[:, 3:5] + s[:, 5:6] * np.stack([arm[:, 1], -arm[:, 0]], 1)
@@ -54,72 +82,58 @@ class ChainKinematics:
             v_axial[two] = 0.5 * (v_axial[two] + v_origin[c, 1:2])
         off += axial * self.body_d[b0]
         voff += v_axial * self.body_d[b0]
-        # the bone turns by exp(rho) in its frame: bent in two planes, its
-        # angular velocity is not rho's rate (the children riding on it
-        # turned at the wrong rate: docs/physics.md, "Planes")
-        wrel = rotvec_rate(rho, rate)
-        own = matrices_from_rotvec(rho)
-        rot = np.empty((n, 3, 3))
-        pivot = np.empty((n, 3))
-        vcog = np.empty((n, 3))
-        omega = np.empty((n, 3))
-        frame_rot = np.empty((n, 3, 3))
-        attach = np.empty((n, 3))
-        cog = np.empty((n, 3))
-        vec = np.empty((n, 3))  # each bone's pivot-to-tip vector
-        for lv in self.levels:
-            bones, has, pp = lv["bones"], lv["has"], lv["pp"]
-            rp = np.broadcast_to(EYE, (len(bones), 3, 3)).copy()
-            at = lv["attach_rest"].copy()
-            if lv["any"]:
-                rp[has] = rot[pp]
-                at[has] = pivot[pp] + apply(rot[pp], lv["attach_arm"])
-            frame_rot[bones] = rp
-            attach[bones] = at
-            r = compose(rp, own[bones])
-            rot[bones] = r
-            # pivots: each row's head from its own state, the rest follow the chain
-            grid, valid = lv["grid"], lv["valid"]
-            h = lv["head_pos"]
-            heads = lv["heads"]
-            head = at[h] + apply(rp[h], lv["head_arm"] + off[heads])
-            step = np.zeros(grid.shape + (3,))
-            vec[bones] = step[valid] = apply(r, lv["step"])
-            piv = head[:, None, :] + np.cumsum(step, axis=1) - step
-            pivot[bones] = piv[valid]
-            c = cog[bones] = pivot[bones] + apply(r, lv["cog_arm"])
-            w = apply(rp, wrel[bones])
-            if lv["any"]:
-                w[has] += omega[pp]
-            omega[bones] = w
-            # velocities follow the chain as its pivots do: each row's head
-            # pivot from its own body, the rest by the turn rates of the bones
-            # before them (a body's own axial velocity would be averaged over
-            # two planes, wrong once one plane turns far: a felled stem)
-            hp = piv[:, 0]
-            hv = apply(rp[h], voff[heads])
-            fh = lv["p"][h]
-            held = fh >= 0
-            if held.any():
-                f = fh[held]
-                hv[held] += vcog[f] + cross(omega[f], hp[held] - cog[f])
-            turn = np.zeros(grid.shape + (3,))
-            turn[valid] = cross(w, step[valid])
-            vp = hv[:, None, :] + np.cumsum(turn, axis=1) - turn
-            vcog[bones] = vp[valid] + cross(w, c - pivot[bones])
-        if self.debris.count:
-            d = self.debris.bones
-            rot[d], pivot[d], vcom_d, omega[d] = self.debris.bone_poses()
-            frame_rot[d] = EYE
-            vec[d] = apply(rot[d], self.tip0[d] - self.pivot0[d])
-        com = pivot + apply(rot, self.com0 - self.pivot0)
-        vcom = vcog + cross(omega, com - cog)
-        if self.debris.count:
-            vcom[d] = vcom_d
-            vcog[d] = vcom_d  # debris bones carry no lumped children
-            cog[d] = com[d]
-        return {"rot": rot, "pivot": pivot, "cog": cog, "com": com, "vcog": vcog, "vec": vec,
-                "vcom": vcom, "omega": omega, "frame_rot": frame_rot, "attach": attach}
+        return matrices_from_rotvec(rho), rotvec_rate(rho, rate), off, voff
+
+    def _level_pose(self, lv: dict, own: np.ndarray, off: np.ndarray,
+                    p: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Write one level's frames, rotations, pivots, steps and COGs into
+        `p` (its parents' already there): each row's head pivot from its own
+        state, the rest following the chain. Returns the frames' rotations,
+        the steps and pivots in the level's grid."""
+        bones, has, pp = lv["bones"], lv["has"], lv["pp"]
+        rot, pivot = p["rot"], p["pivot"]
+        rp = np.broadcast_to(EYE, (len(bones), 3, 3)).copy()
+        at = lv["attach_rest"].copy()
+        if lv["any"]:
+            rp[has] = rot[pp]
+            at[has] = pivot[pp] + apply(rot[pp], lv["attach_arm"])
+        p["frame_rot"][bones] = rp
+        p["attach"][bones] = at
+        r = compose(rp, own[bones])
+        rot[bones] = r
+        h = lv["head_pos"]
+        head = at[h] + apply(rp[h], lv["head_arm"] + off[lv["heads"]])
+        step = np.zeros(lv["grid"].shape + (3,))
+        p["vec"][bones] = step[lv["valid"]] = apply(r, lv["step"])
+        piv = head[:, None, :] + np.cumsum(step, axis=1) - step
+        pivot[bones] = piv[lv["valid"]]
+        p["cog"][bones] = pivot[bones] + apply(r, lv["cog_arm"])
+        return rp, step, piv
+
+    def _level_velocity(self, lv: dict, rp: np.ndarray, step: np.ndarray, piv: np.ndarray,
+                        wrel: np.ndarray, voff: np.ndarray, p: dict) -> None:
+        """Write one level's angular velocities and COG velocities into `p`,
+        following the chain as the pivots do: each row's head from its own
+        body, the rest by the turn rates of the bones before them (a body's
+        own axial velocity is averaged over two planes: "Velocities")."""
+        bones, has, valid = lv["bones"], lv["has"], lv["valid"]
+        omega, vcog, cog = p["omega"], p["vcog"], p["cog"]
+        w = apply(rp, wrel[bones])
+        if lv["any"]:
+            w[has] += omega[lv["pp"]]
+        omega[bones] = w
+        h = lv["head_pos"]
+        hp = piv[:, 0]
+        hv = apply(rp[h], voff[lv["heads"]])
+        fh = lv["p"][h]
+        held = fh >= 0
+        if held.any():
+            f = fh[held]
+            hv[held] += vcog[f] + cross(omega[f], hp[held] - cog[f])
+        turn = np.zeros(lv["grid"].shape + (3,))
+        turn[valid] = cross(w, step[valid])
+        vp = hv[:, None, :] + np.cumsum(turn, axis=1) - turn
+        vcog[bones] = vp[valid] + cross(w, cog[bones] - p["pivot"][bones])
 
     def joint_gap(self, worst: bool = False):
         """Largest separation of a live pivot, as a fraction of the mean

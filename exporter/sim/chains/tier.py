@@ -1,45 +1,7 @@
-"""The planar LOD: each limb is a 2D pymunk chain in its own bending plane.
-
-docs/physics.md has the derivations and the measurements behind each choice.
-
-- Chains: a chain is a limb of the rig (a limb and its continuations,
-  rig.physics_chains). One pymunk body per bone and plane, a `PivotJoint` at
-  each junction, a `DampedRotarySpring` toward the rest angle and a
-  `RotaryLimitJoint` for the cone. With `planes = 2` a chain bends in two
-  perpendicular planes whose deflections combine into a 3D rotation without
-  twist; with 1, in the plane of the dominant load.
-- Planes: a chain's plane contains its chord d and the component of the
-  tree's dominant horizontal load perpendicular to d (wind, pull, felling or
-  blast direction), falling back to gravity, then to the world axes.
-- Parent to child: a child chain lives in the moving frame of the bone it
-  hangs on. Its bodies hold their motion relative to that frame; gravity and
-  air loads are rotated into it, and the frame's acceleration enters as
-  d'Alembert forces (translation, Euler, centrifugal and Coriolis terms), so
-  children ride on their parents.
-- Child to parent: a body carries the limbs attached to it as if they were
-  rigid: their mass and inertia are lumped into it and their loads act on it
-  at the positions they would have if rigid. Their own swaying does not push
-  back (one-way coupling; the accuracy report measures what it costs). An
-  axis that forks sympodially is one chain, so a decurrent crown's main
-  axes do bend together.
-- Prestress: spring rest angles are offset so that the grown shape is the
-  equilibrium under gravity (scene `prestress = true`).
-- Stability: stability.py (the rotary-inertia floor); spring damping
-  c = k h_c / 2 (h_c the substep, at least 1 ms: the reference's numerical
-  damping at 1/2000 s) damps the highest chain modes and barely touches the
-  sway; structural damping is mass-proportional (rig.alpha) and applied
-  as an exact exponential decay over each force interval.
-- Breaking: a joint whose bending moment (spring plus cone limit) exceeds
-  its strength is removed. In a root chain the part above falls on as a
-  free planar chain (a snapped or uprooted stem); elsewhere, or when that
-  part is a stem's light top (breaking.LIGHT_PIECE), the part broken
-  off becomes rigid debris (debris.py). Felling removes a root joint's
-  spring and cone at the cut (the hinge holds), then the hinge when the lean
-  passes `hinge` degrees.
-- Cost: loads, inertial forces and contacts are evaluated with numpy on all
-  bones at `force_rate` and held between evaluations; bodies are read and
-  written in bulk through `pymunk.batch`; nothing loops over bodies in Python
-  in the step.
+"""The planar LOD's pymunk tier: each limb a 2D pymunk chain in its own
+bending planes, built in build.py, rebuilt in 3D in kinematics.py, loaded in
+forces.py, broken in breaking.py; this module runs it frame by frame. The
+design and the measurements behind it: docs/physics.md, "The pymunk tier".
 """
 
 from __future__ import annotations
@@ -53,26 +15,19 @@ import pymunk
 from pymunk import batch
 
 from ...errors import SimulationError
+from ...quality import Quality
 from ...rotations import quaternions_from_matrices, rotvecs_from_matrices
 from ...scene import Scene
 from ..audit import Ledger, LoadWork, bone_energy, per_tree
-from ..common import (
-    ProjectileTracks,
-    SimTree,
-    TreeMotion,
-    locate,
-    sub_frame_samples,
-    tree_motion,
-)
+from ..common import ProjectileTracks, SimTree, TreeMotion, locate, sub_frame_samples, tree_motion
 from ..debris import Debris
 from ..events import TIER, Event
 from ..handoff import Engine, HandOff, Reason, TierReport
 from ..hinges import hinges_from_pose
-from ..range import RETURN_DETAIL, ReturnWatch, in_return_range
-from ..rules import BLAST_RING
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
-from ...quality import Quality
+from ..range import RETURN_DETAIL, ReturnWatch, in_return_range
+from ..rules import BLAST_RING
 from .breaking import ChainEvents
 from .build import SPRING, ChainBuild
 from .forces import ChainForces
@@ -98,16 +53,16 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.update_every = min(divisors, key=lambda d: (abs(d - want), d))
         self.dt_update = self.h * self.update_every
         self.trees = [t for t in trees if t.active]
-        # the linear tier's step (s) when its trees may go back to it once
-        # back in the linear range (lod.py), and the frame, hinge angles and
-        # rates (2B,) where they did: from then on the tier records nothing
+        self.cuts = any(t.cut is not None for t in self.trees)
+        # the linear tier's step (s) if the trees may go back to it (scheduler.py), and
+        # the frame, hinge angles and rates (2B,) where they did (then nothing is recorded)
         self.hand_back: float | None = None
         self.handed_back: tuple | None = None
         self.watch = ReturnWatch(scene.fps)  # back in the linear range?
         self._collect()
         self._chains()
         self._lumping()
-        self._levels()
+        self._layout()
         self._space()
 
     def locate(self, bone: int) -> tuple[str, int]:
@@ -115,6 +70,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         return locate(self.trees, self.offsets, self.bone_tree, bone)
 
     def bone_path(self, bone: int) -> str:
+        """A global bone's segment path in its tree."""
         ti = int(self.bone_tree[bone])
         return self.trees[ti].rig.model.segment_paths()[self.locate(bone)[1]]
 
@@ -158,48 +114,39 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         """Set up a run from substep `substep` (time substep x h), from rest
         or, with `start`, from a pose and spin handed over by the linear tier;
         the frame it starts in (or at) is recorded."""
-        scene, n = self.scene, self.n
-        frames = scene.frame_count
-        self.quats = np.zeros((frames, n, 4))
-        self.pivots = np.zeros((frames, n, 3))
+        scene, n, nb, trees = self.scene, self.n, len(self.bodies), len(self.trees)
+        self.quats = np.zeros((scene.frame_count, n, 4))
+        self.pivots = np.zeros((scene.frame_count, n, 3))
         self.events: list[Event] = []
         self.cut_state: dict[int, str] = {}
         self.joint_alive = np.ones(n, dtype=bool)
         self.in_debris = np.zeros(n, dtype=bool)
         self.breakable = np.isfinite(self.strength[self.body_bone])
-        self.pivot_alive = np.ones(len(self.bodies), dtype=bool)
-        self.rigid_root = np.full(len(self.bodies), -1, dtype=np.int64)
-        self.still_time = np.zeros(len(self.trees))
+        self.pivot_alive = np.ones(nb, dtype=bool)
+        self.rigid_root = np.full(nb, -1, dtype=np.int64)
+        self.still_time = np.zeros(trees)
         self.quiet = self._quiet_times()
         self.samples: list = []  # this frame's update poses (time, rotations, pivots)
         self.extra: list[list] = [[] for _ in self.trees]  # kept sub-frame samples per tree
         self.debris = Debris(self.mass, self.inertia, self.com0, self.pivot0, self.tip0,
                              self.radius, scene.ground, self.loads.g)
-        self.ledger = Ledger(frames, len(self.trees))
+        self.ledger = Ledger(scene.frame_count, trees)
         self.load_work = LoadWork()
         self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
         if start is not None:
             self._hand_over(start)
         self.read()
-        self.pose = self.reconstruct()
-        self.prev = None
-        self.substep = substep
-        self.fresh = True
-        self.next_update = self.last_update = substep
-        self.contact_active = False
-        # a free stem takes its chains' recoil (forces.py's _recoil), from each
-        # lumped bone's velocity (m/s) relative to the stem it hangs on and
+        self.pose, self.prev, self.fresh = self.reconstruct(), None, True
+        self.substep = self.next_update = self.last_update = substep
+        self.contact_active = self.recoiling = False
+        # _recoil's record: per bone, its velocity (m/s) relative to its stem and
         # that velocity's moment about the origin (m^2/s) at the last update
-        self.recoiling = False
         self.recoil_v = np.full((n, 3), np.nan)
         self.recoil_l = np.full((n, 3), np.nan)
-        self.free_pieces = None  # forces.py's _free_pieces, and what they were taken at
-        self.bent = None  # forces.py's _bent_rows, and what they were taken at
+        self.free_pieces = self.bent = None  # forces.py's caches, with their _layout_key
         self.contact_dt = self.h  # s, the hold the ground's springs were last set for
         self.refine = 1
-        first = substep // self.spf
-        self.start_frame = first  # the frame it starts in (or at)
-        self.substep_start = substep
+        first = self.start_frame = substep // self.spf  # the frame it starts in (or at)
         # the first frame whose pose is its own (one started between frames
         # records the hand-over's pose in the frame before)
         self.first_frame = first + (1 if substep % self.spf else 0)
@@ -221,32 +168,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         t = self.substep * self.h
         while self.substep < f * self.spf:
             if self.substep >= self.next_update:
-                t0 = time.perf_counter()
-                if not self.fresh:
-                    self.read()
-                    self.check(t)
-                    self.prev, self.pose = self.pose, self.reconstruct()
-                    self.samples.append((t, self.pose["rot"], self.pose["pivot"]))
-                self.fresh = False
-                if self.cut_list:
-                    self.handle_cuts(t)
-                if self.breakable.any():
-                    before = len(self.events)
-                    self.check_breaks(t, self.pose)
-                    if len(self.events) > before:
-                        self.pose = self.reconstruct()
-                # contact needs a stiff spring, and only an update every
-                # substep affords one: while anything touches the ground,
-                # update at the substep rate; so too while a blast pushes
-                # (its capped push turns twigs within one 8 ms hold: the
-                # audit found 3 % of its work unexplained) and its twigs ring
-                ahead = 1 if (self.contact_active or self.recoiling or self._blast_acting(t)
-                              or self._projectile_near()) else self.update_every
-                self.forces(t, self.pose, self.prev,
-                            max(self.substep - self.last_update, 1) * self.h, ahead * self.h)
-                self.last_update, self.next_update = self.substep, self.substep + ahead
-                self.stats.updates += 1
-                self.stats.update_seconds += time.perf_counter() - t0
+                self._update(t)
             t0 = time.perf_counter()
             batch.set_space_bodies(self.space, writes, self.write_buf)
             if self.refine > 1:
@@ -261,6 +183,43 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
             self.stats.substeps += 1
             t = self.substep * self.h
         t0 = time.perf_counter()
+        self._record_frame(f, t)
+        self.stats.update_seconds += time.perf_counter() - t0
+        self.stats.frame_seconds.append(time.perf_counter() - t_frame)
+        self.stats.debris_clamped = self.debris.clamped
+
+    def _update(self, t: float) -> None:
+        """A load update at `t` s: the pose read and rebuilt (unless the
+        frame's is fresh), cuts and breaks, then the forces, held for
+        `update_every` substeps, or one while anything touches the ground, a
+        free stem recoils, a blast pushes or its twigs ring, or a projectile
+        is near (a stiff contact, a fast push or a hit needs it: "Bulk work")."""
+        t0 = time.perf_counter()
+        if not self.fresh:
+            self.read()
+            self.check(t)
+            self.prev, self.pose = self.pose, self.reconstruct()
+            self.samples.append((t, self.pose["rot"], self.pose["pivot"]))
+        self.fresh = False
+        if self.cuts:
+            self.handle_cuts(t)
+        if self.breakable.any():
+            before = len(self.events)
+            self.check_breaks(t, self.pose)
+            if len(self.events) > before:
+                self.pose = self.reconstruct()
+        ahead = 1 if (self.contact_active or self.recoiling or self._blast_acting(t)
+                      or self._projectile_near()) else self.update_every
+        self.forces(t, self.pose, self.prev, max(self.substep - self.last_update, 1) * self.h,
+                    ahead * self.h)
+        self.last_update, self.next_update = self.substep, self.substep + ahead
+        self.stats.updates += 1
+        self.stats.update_seconds += time.perf_counter() - t0
+
+    def _record_frame(self, f: int, t: float) -> None:
+        """Read, check and record frame f at `t` s: its pose, the updates
+        since the last frame as sub-frame samples, the energy audit, the
+        projectiles; then sleep, and the hand back to the linear tier."""
         self.read()
         self.check(t)
         gap, body = self.joint_gap(worst=True)
@@ -287,9 +246,6 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
             self.handed_back = (f, *hinges_from_pose(self.bones, pose_frame["rot"],
                                                      pose_frame["omega"]))
             self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL) for tr in self.trees)
-        self.stats.update_seconds += time.perf_counter() - t0
-        self.stats.frame_seconds.append(time.perf_counter() - t_frame)
-        self.stats.debris_clamped = self.debris.clamped
 
     def _back_in_range(self, t: float, pose: dict) -> bool:
         """Whether the trees have been back in the linear range for
@@ -307,10 +263,9 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         return self.watch.update(intact)
 
     def _audit(self, frame: int, pose: dict) -> None:
-        """Record each tree's energy (audit.py): its bones' (debris included)
-        kinetic and gravitational energy, its live springs' and the ground's
-        contact springs' (contact.stored_energy); the work of
-        the debris' loads joins the ledger here."""
+        """Record each tree's energy (audit.py): its bones' kinetic and
+        gravitational energy (debris included), its live springs' and the
+        ground's contact springs'; the debris' loads' work joins the ledger."""
         e = bone_energy(self.mass, self.inertia, pose["rot"], pose["com"], pose["vcom"],
                         pose["omega"], -self.loads.g[2])
         springs = np.zeros(len(self.bodies))
@@ -322,11 +277,14 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 springs[i] = 0.5 * spring.stiffness * eps * eps
         e += np.bincount(self.body_bone, springs, minlength=self.n)
         e += self.contact_energy(pose)
-        self.ledger.add_work(per_tree(self.debris.work, self.bone_tree, len(self.trees)))
+        self.ledger.add_work(self._per_tree(self.debris.work))
         self.debris.work[:] = 0.0
-        self.ledger.record(frame, per_tree(e, self.bone_tree, len(self.trees)),
-                           per_tree(self.load_work.pending(pose["com"]), self.bone_tree,
-                                    len(self.trees)))
+        self.ledger.record(frame, self._per_tree(e), self._per_tree(self.load_work.pending(
+            pose["com"])))
+
+    def _per_tree(self, values: np.ndarray) -> np.ndarray:
+        """Per-bone values summed per tree."""
+        return per_tree(values, self.bone_tree, len(self.trees))
 
     def _axes(self, pose: dict) -> np.ndarray:
         """The bones' unit axes (B, 3) in `pose`."""
@@ -335,10 +293,9 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
     def _blast_acting(self, t: float) -> bool:
         """Whether a blast pushes the tier's bones within the next update's
         hold, or pushed them within BLAST_RING s (SceneLoads.blast_pushing,
-        at the current pose). While the twigs ring, frame forces held over
-        8.3 ms reach them late: the `explosion` preset's oak alone, 0.3 s
-        past the front, broke 11 joints, 6 with loads every substep through
-        the ring (the reference at 1/16000 s: 6)."""
+        at the current pose): frame forces held over a hold reach ringing
+        twigs late (docs/physics.md, "The twigs ring with their loads updated
+        every substep")."""
         return bool(self.loads.explosions) and self.loads.blast_pushing(
             t, self.update_every * self.h, self.pose["com"], self._axes(self.pose), self.props,
             BLAST_RING)
@@ -355,6 +312,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         self.add_tree_work(int(self.bone_tree[bone]), joules)
 
     def add_tree_work(self, tree: int, joules: float) -> None:
+        """Energy given to a tree from outside (a feller's push)."""
         w = np.zeros(len(self.trees))
         w[tree] = joules
         self.ledger.add_work(w)
@@ -368,11 +326,10 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
 
     def _hand_over(self, start: StartState) -> None:
         """Put every body where the handed-over pose has its bone: each
-        plane's angle is the bone's rotation relative to its chain's frame
-        projected on the plane's normal, and likewise its rate; pivots and
-        velocities follow down each 2D chain, so the pivots start joined.
-        (The planes hold no twist: what the linear tier's two hinges turned
-        about a bone's own axis, a second-order amount, is dropped.)"""
+        plane's angle (and rate) is the bone's rotation relative to its
+        chain's frame projected on the plane's normal; pivots and velocities
+        follow down each 2D chain, so the pivots start joined. (The planes
+        hold no twist: a turn about a bone's own axis is dropped.)"""
         bb = self.body_bone
         frame = self.bone_frame[bb]
         has = frame >= 0
@@ -383,22 +340,22 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         rate = (np.einsum("bji,bj->bi", fr, start.omega[bb] - w_frame) * self.body_n).sum(1)
         pos = self.q0.copy()
         vel = np.zeros((len(bb), 2))
-        prev = self.prev_body
-        for i in range(len(bb)):  # bodies of a chain plane follow each other in order
-            j = prev[i]
-            if j >= 0:
-                arm = self.q0[i] - self.q0[j]
-                c, s = math.cos(angle[j]), math.sin(angle[j])
-                turned = np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
-                pos[i] = pos[j] + turned
-                vel[i] = vel[j] + rate[j] * np.array([-turned[1], turned[0]])
-        for i, body in enumerate(self.bodies):
-            arm = self.cog2d0[i] - self.q0[i]
+
+        def turned(i: int, arm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """`arm` (m) turned by body i's angle, and its velocity (m/s) at i's rate."""
             c, s = math.cos(angle[i]), math.sin(angle[i])
-            turned = np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
+            arm = np.array([c * arm[0] - s * arm[1], s * arm[0] + c * arm[1]])
+            return arm, rate[i] * np.array([-arm[1], arm[0]])
+
+        for i, j in enumerate(self.prev_body):  # a chain plane's bodies follow each other
+            if j >= 0:
+                arm, v = turned(j, self.q0[i] - self.q0[j])
+                pos[i] = pos[j] + arm
+                vel[i] = vel[j] + v
+        for i, body in enumerate(self.bodies):
             body.angle = float(angle[i])
             body.position = tuple(pos[i].tolist())
-            body.velocity = tuple((vel[i] + rate[i] * np.array([-turned[1], turned[0]])).tolist())
+            body.velocity = tuple((vel[i] + turned(i, self.cog2d0[i] - self.q0[i])[1]).tolist())
             body.angular_velocity = float(rate[i])
 
     def _quiet_times(self) -> np.ndarray:
@@ -406,15 +363,10 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         (inf: wind, projectiles in the scene, pulls until their release)."""
         out = np.zeros(len(self.trees))
         for ti, tree in enumerate(self.trees):
-            m = tree.rig.model
-            lo, hi = m.bounds()
+            lo, hi = tree.rig.model.bounds()
             quiet = self.loads.quiet_after(0.5 * (lo + hi), 0.5 * float(np.linalg.norm(
                 hi[:2] - lo[:2])), float(hi[2]))
             for p in tree.pulls:
                 quiet = max(quiet, p.release)
             out[ti] = math.inf if self.scene.projectiles else quiet
         return out
-
-    @property
-    def cut_list(self) -> bool:
-        return any(t.cut is not None for t in self.trees)
