@@ -22,7 +22,7 @@ bakes alone (independent of either solver's bookkeeping):
                            [--solvers planar full]
                            [--timestep 1/64000]   # the full reference's step (s)
                            [--quality final]      # the LOD's level (default: the scene's)
-                           [--engine articulated] # the LOD's nonlinear engine without MuJoCo
+                           [--engine pymunk]      # the LOD's engine for every reason
 
 A blast on a sapling is the case to convergence-check (`--timestep`): the
 reference's peak twig moments ("closest to breaking", the largest moment /
@@ -145,10 +145,9 @@ def main() -> None:
                     help="the full reference's step, s (e.g. 1/64000; default: its own)")
     ap.add_argument("--quality", choices=list(QUALITIES), default=None,
                     help="the planar LOD's level (default: the scene's own)")
-    ap.add_argument("--engine", choices=["auto", "articulated", "pymunk"], default="auto",
-                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed), "
-                         "articulated (with pymunk for cuts and hits: what an install "
-                         "without the `reference` extra runs) or pymunk")
+    ap.add_argument("--engine", choices=["auto", "pymunk", "reference"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (the engine table of "
+                         "docs/physics.md), or pymunk or reference for every reason")
     ap.add_argument("--out", default=str(ROOT / "out" / "bench"))
     args = ap.parse_args()
     level = QUALITIES[args.quality] if args.quality else None

@@ -1,11 +1,12 @@
 """Bake every preset and report the cost: wall time, simulated seconds,
 segments, and microseconds per segment-step (simulated segments x substeps);
-and the energy audit: the largest unexplained gain of any tree (as a
-fraction of its energy and the work done on it; the bake warns past 2 %)
-and the joints broken.
+each engine's CPU per segment-frame (the planar LOD: which engine costs
+what, the weights of its progress estimate); and the energy audit: the
+largest unexplained gain of any tree (as a fraction of its energy and the
+work done on it; the bake warns past 2 %) and the joints broken.
 
     python bench/presets.py [--quality default] [--solver planar|full] [--only NAME ...]
-                            [--engine articulated] [--json out/bench/presets.json]
+                            [--engine pymunk|reference] [--json out/bench/presets.json]
 
 Timings are from one run on a shared machine: compare ratios, not absolutes.
 """
@@ -57,6 +58,10 @@ def bench(path: Path, quality: str | None, solver: str = "planar", engine: str =
         "solver": solver, "engine": engine, "broken_joints": broken,
         "worst_gain_fraction": audit[worst]["max_gain_fraction"] if worst else 0.0,
         "worst_gain_tree": worst, "worst_gain_at_s": audit[worst]["at_s"] if worst else None,
+        "engines": {e: {**v, "us_per_segment_frame": round(
+            1e6 * v["cpu_seconds"] / max(v["segment_frames"], 1), 1)}
+            for e, v in t.get("engines", {}).items()},
+        "versions": bake.meta.get("versions", {}),
         "notes": bake.meta.get("notes", []),
     }
 
@@ -66,15 +71,15 @@ def main() -> None:
     ap.add_argument("--quality", choices=tuple(QUALITIES))
     ap.add_argument("--solver", choices=("planar", "full"), default="planar")
     ap.add_argument("--only", nargs="*", help="preset names")
-    ap.add_argument("--engine", choices=["auto", "articulated", "pymunk"], default="auto",
-                    help="the planar LOD's nonlinear engine: auto (MuJoCo when installed), "
-                         "articulated (with pymunk for breaks, cuts and hits: what an install "
-                         "without the `reference` extra runs) or pymunk")
+    ap.add_argument("--engine", choices=["auto", "pymunk", "reference"], default="auto",
+                    help="the planar LOD's nonlinear engine: auto (the engine table of "
+                         "docs/physics.md), or pymunk or reference for every reason")
     ap.add_argument("--json", default=str(ROOT / "out" / "bench" / "presets.json"))
     args = ap.parse_args()
     rows = []
     print(f"{'preset':<11} {'trees':>5} {'sim':>4} {'segments':>8} {'sim s':>6} {'wall s':>7} "
-          f"{'cpu s':>7} {'us/seg-step':>11} {'broken':>6} {'worst gain':>10}  tree")
+          f"{'cpu s':>7} {'us/seg-step':>11} {'broken':>6} {'worst gain':>10}  tree  "
+          f"engines: us per segment-frame")
     for path in sorted((ROOT / "presets").glob("*.toml")):
         if args.only and path.stem not in args.only:
             continue
@@ -84,7 +89,8 @@ def main() -> None:
         print(f"{r['preset']:<11} {r['trees']:>5} {r['simulated_trees']:>4} {r['segments']:>8} "
               f"{r['simulated_seconds']:>6.1f} {r['wall_seconds']:>7.2f} {r['cpu_seconds']:>7.2f} "
               f"{us:>11} "
-              f"{r['broken_joints']:>6} {r['worst_gain_fraction']:>10.2%}  {r['worst_gain_tree']}",
+              f"{r['broken_joints']:>6} {r['worst_gain_fraction']:>10.2%}  {r['worst_gain_tree']}  "
+              + ", ".join(f"{e} {v['us_per_segment_frame']:g}" for e, v in r["engines"].items()),
               flush=True)
     write_text(args.json, json.dumps(rows, indent=2) + "\n")
     print(f"written {args.json}")

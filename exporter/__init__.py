@@ -12,7 +12,7 @@ Errors a user can cause are `InputError`s (exit code 2 on the command line).
 Imports are lazy: `import treebake` loads no simulation code.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from .api import bake_scene, export_bake, load_bake, load_scene, save_bake  # noqa: E402
 from .errors import InputError, TreebakeError  # noqa: E402

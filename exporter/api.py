@@ -31,15 +31,18 @@ def load_scene(source: str | Path, **overrides):
     return load_job(resolve(str(source)), overrides)
 
 
-def bake_scene(scene, solver: str = "planar", workers: int = 1, progress=None):
+def bake_scene(scene, solver: str = "planar", workers: int = 1, progress=None, quality=None):
     """Grow, rig and simulate `scene` (from `load_scene`); returns the
     `Bake` (per frame and segment: base position, m, and rotation). solver:
-    "planar" (the fast LOD) or "full" (the MuJoCo reference, extra
-    `treebake[reference]`); workers: processes (the result is the same for
-    any number); progress(done, total) is called per frame."""
+    "planar" (the planar LOD: the linear tier, with the pymunk tier and the
+    MuJoCo reference for trees that leave its range) or "full" (the MuJoCo
+    reference for everything); quality: a `treebake.quality.Quality` that
+    overrides the scene's; workers: processes (the result is the same for
+    any number); progress(done, total) is called as it goes (growing
+    numbers in any unit: done / total is the share done)."""
     from .pipeline import bake_scene as _bake
 
-    return _bake(scene, solver=solver, workers=workers, progress=progress)
+    return _bake(scene, solver=solver, quality=quality, workers=workers, progress=progress)
 
 
 def save_bake(bake, path: str | Path) -> Path:

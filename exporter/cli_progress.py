@@ -26,13 +26,17 @@ def progress_bar(label: str):
     start = time.perf_counter()
     tty = sys.stderr.isatty()
     last = [start]
+    finished = [False]
 
     def show(done: float, total: float) -> None:
         # `done` and `total` in any units that grow (frames, the LOD's planned work)
+        if finished[0]:
+            return
         elapsed = time.perf_counter() - start
         share = min(1.0, done / total) if total > 0 else 1.0
         eta = elapsed / share * (1.0 - share) if share > 0 else float("nan")
         left = f"{eta:.0f} s left" if eta == eta else "estimating"
+        finished[0] = share >= 1.0
         if not tty:
             if share >= 1.0:
                 sys.stderr.write(f"{label}: done in {elapsed:.1f} s\n")

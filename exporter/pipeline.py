@@ -17,7 +17,7 @@ from .scene import Scene
 from .sim.events import summary
 from .sim.loads import SceneLoads
 from .sim.rigging import RiggedScene, rig_scene
-from .sim.run import SolverKind, simulate, solver_for
+from .sim.run import SolverKind, require_mujoco, simulate, solver_for
 from .sim.solver import SolveResult
 from .versions import runtime_versions
 
@@ -34,6 +34,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     log = log or (lambda msg: None)
     started = time.perf_counter()
     kind = SolverKind(solver)
+    require_mujoco()  # before any work: a bake never switches engines silently
     if quality is not None:
         scene = replace(scene, quality=quality)
     grown = grow(scene)

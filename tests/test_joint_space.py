@@ -191,7 +191,7 @@ def test_hinges_from_pose_inverts_the_exact_kinematics(js):
     angles and rates recovered from pose_frames' exact rotations (angles up
     to 1.2 rad) and from their finite-difference spins are the ones put in."""
     from treebake.rotations import matrices_from_quaternions
-    from treebake.sim.linear import hinges_from_pose, pose_frames
+    from treebake.sim.hinges import hinges_from_pose, pose_frames
 
     rng = np.random.default_rng(5)
     b = js.bones
@@ -276,7 +276,7 @@ def test_a_tree_that_stays_keeps_its_work_when_another_leaves():
         file="<test>")
     bake = bake_scene(scene, quality=replace(QUALITIES["default"], nonlinear="pymunk"))
     left, stayed = bake.trees
-    assert left.info["solver"].startswith("linear, then pymunk at ")
+    assert left.info["solver"].startswith("linear, then pymunk from ")
     assert stayed.info["solver"] == "linear"
     audit = bake.meta["energy"][stayed.name]
     assert audit["external_work_j"] > 20.0

@@ -52,7 +52,7 @@ def test_a_part_breaking_off_a_spinning_body_leaves_its_wood_moving_as_before(tm
     before = {i: [tier.bodies[i].velocity_at_world_point(p) for p in points[i]] for i in stays}
     cog_before = {i: tier.bodies[i].center_of_gravity for i in stays}
     tier.read()
-    tier.break_joint(branch, 0.0, tier.reconstruct(), "test")
+    tier.break_joint(branch, 0.0, tier.reconstruct(), 0.0)
     moved = [i for i in stays if (tier.bodies[i].center_of_gravity - cog_before[i]).length > 1e-3]
     assert moved, "no body that carried the branch changed its centre of gravity"
     for i in stays:
@@ -107,7 +107,7 @@ def test_a_break_does_not_jolt_the_chains_that_stay_on_the_body(tmp_path):
         body.velocity = (0.5 + 0.1 * i, -0.2)
     tier.read()
     before = tier.reconstruct()
-    tier.break_joint(heavy, 0.0, before, "test")
+    tier.break_joint(heavy, 0.0, before, 0.0)
     after = tier.reconstruct()
     since = 1e-3  # s
     rows = tier.row_of_body[light]
@@ -142,9 +142,9 @@ def test_the_velocities_rebuilt_are_the_rate_of_the_pose_rebuilt(tmp_path):
     branch = int(np.nonzero(tier.bone_frame >= 0)[0][0])
     carrier = int(tier.bone_frame[branch])
     tier.read()
-    tier.break_joint(branch, 0.0, tier.reconstruct(), "test")
+    tier.break_joint(branch, 0.0, tier.reconstruct(), 0.0)
     tier.read()
-    tier.break_joint(carrier, 0.0, tier.reconstruct(), "test")
+    tier.break_joint(carrier, 0.0, tier.reconstruct(), 0.0)
     tier.read()
     for i in range(len(tier.bodies)):  # the tier's COGs are pymunk's
         if tier.in_space[i]:
@@ -256,11 +256,11 @@ def test_a_stems_light_top_breaks_off_as_debris_and_a_heavy_one_as_a_chain(tmp_p
     top = tier.n - 1
     assert tier.mass[top] < 0.01 * tier.mass.sum()  # the light piece: the top bone alone
     momentum = tier.mass[top] * pose["vcom"][top]
-    tier.break_joint(top, 0.0, pose, "test")
+    tier.break_joint(top, 0.0, pose, 0.0)
     assert tier.in_debris[top] and not tier.in_debris[:top].any()
     assert not any(tier.in_space[tier.body_of[(top, k)]] for k in range(tier.planes_of_bone[top]))
     after = tier.reconstruct()
     assert np.allclose(tier.mass[top] * after["vcom"][top], momentum, atol=1e-12)
-    tier.break_joint(1, 0.0, after, "test")  # above it, two thirds of the tree
+    tier.break_joint(1, 0.0, after, 0.0)  # above it, two thirds of the tree
     assert not tier.in_debris[1:top].any()
     assert all(tier.in_space[tier.body_of[(b, 0)]] for b in range(1, top))

@@ -174,7 +174,7 @@ def test_projectile_flies_lands_and_is_tracked(root):
 def test_instability_is_reported_with_tree_segment_and_time(root, monkeypatch):
     """The guard: a bone faster than MAX_ANGULAR_SPEED stops the run with
     the tree, a segment of the offending bone and the time."""
-    monkeypatch.setattr(reference, "MAX_ANGULAR_SPEED", 0.5)
+    monkeypatch.setattr(reference.stepper, "MAX_ANGULAR_SPEED", 0.5)
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys"), "name": "shaky"}],
            "duration": 2.0, "fps": 24,
            "pull": [{"tree": 0, "force": [40.0, 0, 0], "release": 0.3, "at": 0.8,
@@ -218,14 +218,14 @@ def test_timestep_and_force_rate_options(root):
     loads = SceneLoads(scene)
     trees = rig_scene(scene, grow(scene), loads, None).trees
     for name, h in reference.TIMESTEPS.items():
-        solver = reference.ReferenceSolver(trees, scene, scene.quality, loads, timestep=h,
+        solver = reference.ReferenceEngine(trees, scene, scene.quality, loads, timestep=h,
                                            force_rate=240.0)
         # the nearest whole number of steps per force interval (1/240 s): 1/2000 s
         # becomes 1/1920, never 1/1600 (which a 30 % tolerance let through)
         steps = max(1, round(1 / (240.0 * h)))
         assert solver.h == pytest.approx(1 / (240.0 * steps), rel=1e-9), name
         assert solver.spf % solver.force_every == 0
-        assert solver.meta()["substep"] == solver.h
+        assert reference.solver.report(solver).stats["step"] == solver.h
 
 
 def test_structural_damping_ratio_is_the_grammars(tmp_path):
@@ -284,7 +284,7 @@ def test_detaching_keeps_every_body_s_pose_and_velocity(root, monkeypatch):
         return out
 
     worst = []
-    detach = reference.ReferenceSolver._detach
+    detach = reference.ReferenceEngine._detach
 
     def checked(self, gi, freed):
         before = bodies(self)
@@ -293,7 +293,7 @@ def test_detaching_keeps_every_body_s_pose_and_velocity(root, monkeypatch):
         worst.append(max(np.abs(before[b] - after[b]).max() for b in before))
         return changed
 
-    monkeypatch.setattr(reference.ReferenceSolver, "_detach", checked)
+    monkeypatch.setattr(reference.ReferenceEngine, "_detach", checked)
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 0.5,
            "fps": 24, "pull": [{"tree": 0, "force": [400.0, 0, 0], "release": 0.5, "at": 0.9,
                                 "ramp": 0.5}]}
@@ -318,7 +318,7 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
     scene = parse_scene(raw, file="<test>")
     loads = SceneLoads(scene)
     trees = rig_scene(scene, grow(scene), loads, None).trees
-    solver = reference.ReferenceSolver(trees, scene, scene.quality, loads)
+    solver = reference.ReferenceEngine(trees, scene, scene.quality, loads)
     (g,) = solver.groups
     m, d = g.model, g.data
     rng = np.random.default_rng(1)

@@ -11,7 +11,7 @@ from typing import Protocol
 import numpy as np
 
 from ..quality import CutEngine, NonlinearPolicy, Quality, TierPolicy
-from .common import TreeMotion
+from .common import ProjectileTracks, TreeMotion
 from .rules import HIT_SUBSTEP_RATE
 
 
@@ -122,7 +122,7 @@ class Tier(Protocol):
     to another engine, or back to the linear tier); `motions()` gives per
     tree the frames it spent there (zero elsewhere), its events, energy and
     work (J, from the tier's start); `report()` its counts, notes and
-    timings."""
+    timings; `tracks()` the flight of the projectiles it moved (or None)."""
 
     first_frame: int
 
@@ -131,6 +131,8 @@ class Tier(Protocol):
     def motions(self) -> list[TreeMotion]: ...
 
     def report(self) -> TierReport: ...
+
+    def tracks(self) -> ProjectileTracks | None: ...
 
 
 @dataclass

@@ -43,6 +43,7 @@ import numpy as np
 from ..rotations import cross, cross_rows, rotation_rows, turn_rows
 from .common import Bones
 from .layout import ChainLayout
+from .rules import limb_damping
 from .treefactor import TreeFactor, ancestor_table, depths
 from .treesums import ChainSums
 
@@ -185,9 +186,8 @@ class JointSpace:
         k_diag = self.k_spring + gravity_entry(every, every)
         k_low = gravity_entry(ii, jj)
         # structural damping: each limb's block of M times its alpha
-        alpha = self.alpha
-        c_diag = alpha * m_diag
-        c_low = np.where(self._same_limb, alpha[jj] * m_low, 0.0)
+        c_diag = limb_damping(m_diag, self.alpha)
+        c_low = limb_damping(m_low, self.alpha[jj], self._same_limb)
         self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
         self._factors: dict[tuple[float, float], TreeFactor] = {}
         # the rates' Jacobian: hinge axes and n x p at this pose, and COMs

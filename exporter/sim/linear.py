@@ -177,6 +177,10 @@ class LinearTier:
             out += self.advance_frame(self.frame)
         return out
 
+    def tracks(self) -> None:
+        """No projectiles in the linear tier (handoff.Tier)."""
+        return None
+
     def report(self) -> TierReport:
         """Counts (deterministic), notes and timings (s) of the run."""
         st = self.stats

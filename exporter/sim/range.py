@@ -17,7 +17,8 @@ CONTACT_MARGIN = 0.05  # m: a tip this close to the ground (and below its rest h
 RETURN_FRACTION = 0.5  # back within this fraction of every limit above ...
 RETURN_WINDOW = 0.5  # s: ... for this long, intact, ...
 RETURN_TURN = 0.02  # rad: ... with no hinge turning more than this per linear step
-RETURN_DETAIL = "to linear: back in the linear range"
+BACK_DETAIL = "back in the linear range"
+RETURN_DETAIL = f"to linear: {BACK_DETAIL}"  # the tier event's
 
 
 class ReturnWatch:

@@ -37,6 +37,16 @@ def exact_decay(alpha: np.ndarray | float, hold: float) -> np.ndarray | float:
     return -np.expm1(-alpha * hold) / hold
 
 
+def limb_damping(mass: np.ndarray, rate: np.ndarray, same_limb=True) -> np.ndarray:
+    """Structural damping's matrix entries C_ij = rate_i M_ij from the
+    joint-space mass matrix's entries M_ij whose two hinges move one limb
+    (`same_limb`; 0 elsewhere): every bone's motion relative to its limb's
+    frame, with all the limb carries, decays at `rate_i` (1/s: the rig's
+    alpha, or exact_decay of it over a held step). Both hinge-coordinate
+    engines (joint_space.py, reference/stepper.py) take C from here."""
+    return np.where(same_limb, rate * mass, 0.0)
+
+
 def past_strength(moment: np.ndarray, strength: np.ndarray) -> np.ndarray:
     """Which joints break: bending moment (N m) above strength (N m)."""
     return moment > strength

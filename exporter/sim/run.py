@@ -41,7 +41,6 @@ def solver_for(kind: SolverKind, rigged: RiggedScene, scene: Scene, loads: Scene
     """The solver of `kind` for the scene's active trees; `timestep` (s):
     the full reference's step (default its own); `workers` processes share
     the planar LOD's chunks."""
-    require_mujoco()
     if SolverKind(kind) is SolverKind.PLANAR:
         from .lod import PlanarLOD
 

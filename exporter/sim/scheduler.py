@@ -24,7 +24,16 @@ from ..quality import Quality, TierPolicy
 from ..scene import Scene
 from .common import ProjectileTracks, SimTree, TreeMotion
 from .events import TIER, Event
-from .handoff import RETURNABLE, Engine, HandOff, Reason, TierReport, TierSpan, engine_for
+from .handoff import (
+    RETURNABLE,
+    Engine,
+    HandOff,
+    Reason,
+    Tier,
+    TierReport,
+    TierSpan,
+    engine_for,
+)
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
 from .rules import HIT_FORCE_RATE, HIT_SUBSTEP_RATE
@@ -125,8 +134,10 @@ class Chunk:
         """Run `run` to the end of the shot; record its motions; the runs
         its hand-offs call for (a failed reference run: the pymunk tier)."""
         try:
+            cpu = time.process_time()
             tier = open_tier(run, self)
-            leaving = self.advance(tier, run)
+            leaving, segment_frames = self.advance(tier, run)
+            cpu = time.process_time() - cpu
         except SimulationError as exc:
             if run.engine is not Engine.REFERENCE:
                 raise
@@ -142,23 +153,22 @@ class Chunk:
             self.records[i].take(m, tier.first_frame, self.work_before.get(i, 0.0),
                                  self.scene.fps)
         report = tier.report()
-        report.timing.update(cpu_seconds=self.cpu, segment_frames=self.segment_frames)
+        report.timing.update(cpu_seconds=cpu, segment_frames=segment_frames)
         self.reports.append(report)
-        tracks = getattr(tier, "tracks", lambda: None)()
-        if tracks is not None:
-            self.objects = tracks
+        self.objects = tier.tracks() or self.objects
         return self.follow(run, leaving)
 
-    def advance(self, tier, run: Run) -> list[list[HandOff]]:
+    def advance(self, tier: Tier, run: Run) -> tuple[list[list[HandOff]], int]:
         """Step a tier frame by frame to the end: per frame, the hand-offs
-        (their work counted from the bake's start)."""
+        (their work counted from the bake's start); and the segment-frames
+        it ran."""
         out = []
         live = list(run.trees)
         if self.progress is not None:
             self.progress.start(run.engine, live, tier.first_frame)
-        self.cpu, self.segment_frames = -time.process_time(), 0
+        segment_frames = 0
         for f in range(tier.first_frame, self.last_frame + 1):
-            self.segment_frames += sum(self.trees[i].rig.model.n_segments for i in live)
+            segment_frames += sum(self.trees[i].rig.model.n_segments for i in live)
             left = tier.advance_to(f)
             if left:
                 out.append([ho.offset_work(self.work_before.get(run.trees[ho.tree], 0.0))
@@ -167,8 +177,7 @@ class Chunk:
                 live = [i for i in live if i not in gone]
             if self.progress is not None:
                 self.progress.tick(run.engine, live, f)
-        self.cpu += time.process_time()
-        return out
+        return out, segment_frames
 
     def follow(self, run: Run, leaving: list[list[HandOff]]) -> list[Run]:
         """The runs that take the trees that left `run` (hand-offs grouped
@@ -208,7 +217,7 @@ class Chunk:
                            self.reports, self.objects)
 
 
-def open_tier(run: Run, chunk: Chunk):
+def open_tier(run: Run, chunk: Chunk) -> Tier:
     """The tier (handoff.Tier) for a run, started from rest or its hand-offs."""
     trees = [chunk.trees[i] for i in run.trees]
     scene, quality, loads, log = chunk.scene, chunk.quality, chunk.loads, chunk.log

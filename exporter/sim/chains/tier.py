@@ -26,7 +26,7 @@ from ..handoff import Engine, HandOff, Reason, TierReport
 from ..hinges import hinges_from_pose
 from ..loads import SceneLoads
 from ..projectiles import Projectiles
-from ..range import RETURN_DETAIL, ReturnWatch, in_return_range
+from ..range import BACK_DETAIL, RETURN_DETAIL, ReturnWatch, in_return_range
 from ..rules import BLAST_RING
 from .breaking import ChainEvents
 from .build import SPRING, ChainBuild
@@ -86,7 +86,7 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                 f, q, v = self.handed_back
                 work = self.ledger.work[f]
                 out += [HandOff(k, f / self.scene.fps, self.substep, q[2 * lo:2 * hi],
-                                v[2 * lo:2 * hi], Reason.BACK, RETURN_DETAIL, frame=f,
+                                v[2 * lo:2 * hi], Reason.BACK, BACK_DETAIL, frame=f,
                                 work=float(work[k]))
                         for k, (lo, hi) in enumerate(zip(self.offsets[:-1], self.offsets[1:]))]
         return out

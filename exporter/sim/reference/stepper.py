@@ -34,9 +34,9 @@ from ..common import (
 )
 from ..events import TIER, Event
 from ..handoff import HandOff, Reason
-from ..range import RETURN_DETAIL, ReturnWatch, in_return_range
+from ..range import BACK_DETAIL, RETURN_DETAIL, ReturnWatch, in_return_range
 from ..loads import SceneLoads, meets
-from ..rules import BLAST_RING, BLAST_STEP, MAX_SPIN, exact_decay
+from ..rules import BLAST_RING, BLAST_STEP, MAX_SPIN, exact_decay, limb_damping
 from .events import ReferenceEvents
 from .model import Group, ReferenceModels
 
@@ -234,7 +234,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         C, joint_space.py). As joint torques it only removes energy."""
         d = g.data
         qv = d.qvel
-        w = d.M[g.damp_adr] * g.damp_rate
+        w = limb_damping(d.M[g.damp_adr], g.damp_rate)  # (entries of one limb only)
         tau = np.bincount(g.damp_row, w * qv[g.damp_col], minlength=len(qv))
         below = g.damp_below
         tau += np.bincount(g.damp_col[below], w[below] * qv[g.damp_row[below]],
@@ -518,7 +518,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL) for tr in self.trees)
             self.handed_back = [
                 HandOff(ti, t, 0, q[2 * lo:2 * hi], v[2 * lo:2 * hi], Reason.BACK,
-                        RETURN_DETAIL, frame=f, work=float(self.ledger.work[f, ti]))
+                        BACK_DETAIL, frame=f, work=float(self.ledger.work[f, ti]))
                 for ti, (lo, hi) in enumerate(zip(self.offsets[:-1], self.offsets[1:]))]
 
     def _end_step(self) -> None:
