@@ -25,7 +25,7 @@ import io
 import json
 import zipfile
 import zlib
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +33,7 @@ import numpy as np
 from .errors import InputError
 from .fileio import atomic_path
 from .rotations import qrotate
+from .versions import runtime_versions
 
 FORMAT_VERSION = 1
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
@@ -147,6 +148,41 @@ class Bake:
         return 0 if tree.static else f
 
 
+def bake_from(scene, solver: str, grown: list, rigged, result, timing: dict) -> Bake:
+    """The bake stage: the Bake of a scene (scene.Scene) as `solver` ("planar"
+    or "full") simulated it: its grown trees (grow.GrownTree), rigged
+    (sim.rigging.RiggedScene), the solver's result (sim.solver.SolveResult:
+    motions by tree name, projectile tracks, meta, notes, engines), and the
+    timings (s) so far. Its meta holds what made it (the versions that
+    decide its motion, versions.py) and the scene's settings."""
+    trees = []
+    for g, sim_tree in zip(grown, rigged.trees):
+        info = {"grammar": g.grammar, "grammar_hash": g.grammar_hash, "seed": g.seed,
+                "first_frequency_hz": round(sim_tree.rig.first_frequency, 5),
+                "bones": sim_tree.rig.n_bones}
+        motion = result.motions.get(g.model.name)
+        if motion is None:
+            info["static"] = rigged.static.get(g.model.name, "not simulated")
+        else:
+            info["solver"] = result.tiers.get(g.model.name, str(solver))
+            info["events"] = [e.record() for e in motion.events]
+        trees.append(tree_bake_from_motion(g.model, sim_tree.rig, motion, info))
+    versions = runtime_versions()
+    meta = {"tool": f"treebake {versions['treebake']}", "versions": versions,
+            "scene": scene.name, "scene_hash": scene.source_hash, "fps": scene.fps,
+            "duration": scene.duration, "seed": scene.seed, "solver": str(solver),
+            "quality": asdict(scene.quality), "prestress": scene.prestress,
+            "gravity": scene.gravity,
+            "culling": rigged.culled,  # trees removed or coarsened by each rule
+            "frame_start": scene.frame_start,  # the exporters' number of frame 0
+            **result.meta}
+    if result.motions:
+        meta["notes"] = result.notes
+    o = result.objects
+    objects = None if o is None else ObjectsBake(o.shapes, o.sizes, o.positions, o.rotations)
+    return Bake(np.arange(scene.frame_count) / scene.fps, trees, meta, objects, timing)
+
+
 def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None):
     """Per-segment base positions (F, S, 3) m and rotations (F, S, 4) x y z
     w from per-bone motion (rotations relative to rest (F, B, 4), pivots
@@ -194,7 +230,7 @@ def tree_bake_from_model(model, positions: np.ndarray, rotations: np.ndarray,
         limb_points=[np.asarray(limb.points, dtype=np.int64) for limb in model.limbs],
         paths=model.segment_paths(),
         positions=positions.astype(np.float32), rotations=rotations.astype(np.float32),
-        info=info)
+        info=info, extra_times=np.zeros(0))
 
 
 # ---------------------------------------------------------------------------

@@ -7,8 +7,6 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
 from .scene import Scene, TreeSpec
@@ -18,21 +16,24 @@ from .turtle import interpret
 @dataclass
 class GrownTree:
     """A scene's tree as grown: its spec, its model (world coordinates, m),
-    its grammar's hash and the seed it grew from."""
+    its grammar's hash, the seed it grew from, its grammar's path as the
+    scene file names it (relative to the scene's folder, so that a bake
+    does not depend on where it was made), its box and its height."""
 
     spec: TreeSpec
     model: TreeModel
     grammar_hash: str
     seed: int
+    grammar: str
+    bounds: tuple  # (lo, hi) (3,) m: the box the placed tree fills
+    height: float  # m
 
-    def grammar_label(self, scene_file: str) -> str:
-        """The grammar's path as the scene file names it (relative to the
-        scene's folder), so a bake does not depend on where it was made."""
-        try:
-            return Path(os.path.relpath(self.spec.grammar,
-                                        Path(scene_file).resolve().parent)).as_posix()
-        except ValueError:  # another drive
-            return Path(self.spec.grammar).name
+
+def _as_named(grammar: Path, scene_file: str) -> str:
+    try:
+        return Path(os.path.relpath(grammar, Path(scene_file).resolve().parent)).as_posix()
+    except ValueError:  # another drive
+        return Path(grammar).name
 
 
 def grow(scene: Scene) -> list[GrownTree]:
@@ -42,6 +43,7 @@ def grow(scene: Scene) -> list[GrownTree]:
     cache: dict[tuple, TreeModel] = {}
     out = []
     for spec in scene.trees:
+        named = _as_named(spec.grammar, scene.file)
         g = grammars.get(spec.grammar)
         if g is None:
             g = grammars[spec.grammar] = load_grammar(spec.grammar)
@@ -53,13 +55,6 @@ def grow(scene: Scene) -> list[GrownTree]:
             model = cache[key] = interpret(d.modules, g, seed=seed)
         m = placed(model, spec.position, spec.rotation)
         m.name = spec.name
-        out.append(GrownTree(spec, m, g.source_hash, seed))
+        out.append(GrownTree(spec, m, g.source_hash, seed, named, m.bounds(), m.height))
     return out
 
-
-def extent(grown: list[GrownTree], margin: float = 20.0) -> np.ndarray:
-    """The horizontal box ((xmin, ymin), (xmax, ymax)) m the trees stand in,
-    widened by `margin` m: where the wind's turbulence is synthesised."""
-    lo = np.min([g.model.points.min(0) for g in grown], axis=0)
-    hi = np.max([g.model.points.max(0) for g in grown], axis=0)
-    return np.array([lo[:2] - margin, hi[:2] + margin])

@@ -29,7 +29,7 @@ def system(grammar: str | Path, count: int = 1) -> JointSpace:
              for i in range(count)]
     scene = parse_scene({"tree": trees, "wind": {"speed": 5.0}}, file="<test>")
     loads = SceneLoads(scene)
-    sim = rig_scene(scene, grow(scene), loads, QUALITIES["final"]).trees
+    sim = rig_scene(scene, grow(scene), QUALITIES["final"]).trees
     bones = Bones.of(sim)
     layout = ChainLayout.of(sim, bones.offsets, bones.pivot0, bones.tip0)
     return JointSpace(bones, layout, loads.g, 0.01, 1e-4)

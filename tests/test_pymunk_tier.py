@@ -28,7 +28,7 @@ def _tier(tmp_path, grammar: str) -> PymunkTier:
     scene = parse_scene({"tree": [{"grammar": str(path)}], "ground": False, "duration": 1.0,
                          "wind": {"speed": 5.0}}, file="<test>")
     loads = SceneLoads(scene, np.array([[-20.0, -20.0], [20.0, 20.0]]))
-    trees = rig_scene(scene, grow(scene), loads, QUALITIES["default"]).trees
+    trees = rig_scene(scene, grow(scene), QUALITIES["default"]).trees
     tier = PymunkTier(trees, scene, QUALITIES["default"], loads)
     tier.begin()
     return tier

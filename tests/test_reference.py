@@ -216,7 +216,7 @@ def test_timestep_and_force_rate_options(root):
 
     scene = parse_scene(calm(str(root / "grammars" / "sapling.lsys")), file="<test>")
     loads = SceneLoads(scene)
-    trees = rig_scene(scene, grow(scene), loads, None).trees
+    trees = rig_scene(scene, grow(scene), None).trees
     for name, h in reference.TIMESTEPS.items():
         solver = reference.ReferenceEngine(trees, scene, scene.quality, loads, timestep=h,
                                            force_rate=240.0)
@@ -317,7 +317,7 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
                            "velocity": [3.0, 0, 1.0]}]}
     scene = parse_scene(raw, file="<test>")
     loads = SceneLoads(scene)
-    trees = rig_scene(scene, grow(scene), loads, None).trees
+    trees = rig_scene(scene, grow(scene), None).trees
     solver = reference.ReferenceEngine(trees, scene, scene.quality, loads)
     (g,) = solver.groups
     m, d = g.model, g.data

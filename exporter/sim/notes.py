@@ -1,14 +1,91 @@
-"""The planar LOD's runs, summed: one record of counts per engine, and the
-bake's notes in words — each kind once, with the counts of every run."""
+"""The planar LOD's runs, summed into its result: each tree's motion and
+engines, one record of counts per engine, the timings, and the bake's notes
+in words — each kind once, with the counts of every run."""
 
 from __future__ import annotations
 
-from .common import cap_note
-from .handoff import Engine, TierReport
+import numpy as np
+
+from ..quality import Quality
+from ..scene import Scene
+from .common import SimTree, cap_note
+from .handoff import Engine, Reason, TierReport, TierSpan
 from .linear import BLAST_SPLIT, ERROR_TOLERANCE
 from .rules import MAX_SPIN, broken_note
+from .solver import SolveResult, frame_timing
 
 SMALLEST = ("step", "substep", "force_interval", "stability")  # per run: the finest
+
+
+def solve_result(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], results: list,
+                 scene: Scene) -> SolveResult:
+    """The planar LOD's SolveResult from its chunks' results (scheduler.
+    ChunkResult, in `plan`'s order)."""
+    motions, tiers = {}, {}
+    for (_, members), res in zip(plan, results):
+        for i, motion, spans in zip(members, res.motions, res.spans):
+            motions[trees[i].name] = motion
+            tiers[trees[i].name] = spans_text(spans)
+    reports = [r for res in results for r in res.reports]
+    returned = sum(s.reason is Reason.BACK for res in results for spans in res.spans
+                   for s in spans)
+    meta, notes = summarise(reports, returned)
+    meta["chunks"] = len(plan)
+    objects = next((res.objects for res in results if res.objects is not None), None)
+    return SolveResult(motions, objects, meta, notes, tiers, timing_of(reports, scene))
+
+
+def spans_text(spans: list[TierSpan]) -> str:
+    """Which engines moved a tree and from when, in words: "linear, then
+    reference from 1.234 s (trunk/2:0: a joint past 80% of its strength)"."""
+    first = spans[0]
+    parts = [f"{first.engine.value} ({first.detail})" if first.detail else first.engine.value]
+    parts += [f"{s.engine.value} from {s.start:.3f} s ({s.detail})" for s in spans[1:]]
+    return ", then ".join(parts)
+
+
+
+def summarise(reports: list[TierReport], returned: int) -> tuple[dict, list[str]]:
+    """The bake's meta (each engine's counts summed over its runs; breaks,
+    debris and returns over all) and its notes."""
+    by_engine = {e: [r for r in reports if r.engine is e] for e in Engine}
+    stats = {e.value: merge_stats([r.stats for r in rs]) for e, rs in by_engine.items() if rs}
+    lin, pym, ref = (stats.get(e.value) for e in Engine)
+    meta: dict = {"runs": {e.value: len(rs) for e, rs in by_engine.items() if rs}}
+    if lin:
+        meta["linear_step"] = lin["step"]
+    if pym:
+        meta["substep"], meta["force_interval"] = pym["substep"], pym["force_interval"]
+    if ref:
+        meta["reference_step"] = ref["step"]
+    meta["stats"] = {"broken": (ref["broken"] if ref else 0) + (pym["broken"] if pym else 0),
+                     "debris": (ref["parts"] if ref else 0) + (pym["debris"] if pym else 0),
+                     "returned": returned, **stats}
+    if ref and "closest_to_breaking" in ref:
+        meta["stats"]["closest_to_breaking"] = ref["closest_to_breaking"]
+    return meta, lod_notes(stats, reports, returned)
+
+
+def timing_of(reports: list[TierReport], scene: Scene) -> dict:
+    """Seconds spent stepping and updating (loads, checks, events) over all
+    runs, per-frame costs of the linear and pymunk tiers, and the simulated
+    segment-steps."""
+    step = sum(r.timing.get("step_seconds", 0.0) for r in reports)
+    update = sum(r.timing.get("update_seconds", 0.0) + r.timing.get("compile_seconds", 0.0)
+                 for r in reports)
+    frame_seconds = np.zeros(scene.frame_count - 1)
+    for r in reports:
+        f = r.timing.get("frame_seconds")
+        if f is not None and len(f):  # a tier started late covers the last frames
+            f = np.asarray(f[-len(frame_seconds):])
+            frame_seconds[len(frame_seconds) - len(f):] += f
+    engines = {e.value: {"cpu_seconds": round(sum(r.timing["cpu_seconds"] for r in rs), 3),
+                         "segment_frames": sum(r.timing["segment_frames"] for r in rs)}
+               for e in Engine if (rs := [r for r in reports if r.engine is e])}
+    return {"engines": engines, "step_seconds": round(step, 3), "update_seconds": round(update, 3),
+            "build_seconds": round(sum(r.timing.get("build_seconds", 0.0) for r in reports), 3),
+            "segment_steps": sum(r.timing.get("segment_steps", 0) for r in reports),
+            **frame_timing(frame_seconds, 1)}
 
 
 def merge_stats(stats: list[dict]) -> dict:

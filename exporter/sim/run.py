@@ -5,12 +5,10 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-import numpy as np
-
 from ..errors import InputError
 from ..scene import Scene
 from .audit import audit_motions, gain_notes
-from .loads import SceneLoads
+from .events import summary
 from .rigging import RiggedScene
 from .solver import Solver, SolveResult
 
@@ -24,9 +22,17 @@ class SolverKind(StrEnum):
     FULL = "full"
 
 
+def solver_kind(solver: str) -> SolverKind:
+    """The solver asked for ("planar" or "full"), once MuJoCo is known to
+    load: it is a dependency, and a bake never silently switches engines
+    (InputError, before any work, where it does not)."""
+    kind = SolverKind(solver)
+    require_mujoco()
+    return kind
+
+
 def require_mujoco() -> None:
-    """Raise InputError, before any work, if MuJoCo cannot be imported: it
-    is a dependency, and a bake never silently switches engines."""
+    """Raise InputError if MuJoCo cannot be imported."""
     try:
         import mujoco  # noqa: F401
     except ImportError as exc:
@@ -35,26 +41,30 @@ def require_mujoco() -> None:
             from None
 
 
-def solver_for(kind: SolverKind, rigged: RiggedScene, scene: Scene, loads: SceneLoads,
-               extent: np.ndarray, workers: int = 1, timestep: float | None = None,
-               log=None) -> Solver:
-    """The solver of `kind` for the scene's active trees; `timestep` (s):
-    the full reference's step (default its own); `workers` processes share
-    the planar LOD's chunks."""
-    if SolverKind(kind) is SolverKind.PLANAR:
+def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int = 1,
+             timestep: float | None = None, log=None, progress=None) -> SolveResult:
+    """The scene's active trees through the solver of `kind` (`timestep` s:
+    the full reference's step, default its own; `workers` processes share
+    the planar LOD's chunks); its result with the energy audit in its meta
+    (meta["energy"]) and the audit's warnings among its notes, and for
+    people one log line per tree and kind of event, then the notes."""
+    log = log or (lambda msg: None)
+    result = solver_for(kind, rigged, scene, workers, timestep, log).run(progress)
+    result.meta["energy"] = audit_motions(result.motions, scene.fps)
+    result.notes = result.notes + gain_notes(result.meta["energy"])
+    for line in summary({name: m.events for name, m in result.motions.items()}) + result.notes:
+        log(line)
+    return result
+
+
+def solver_for(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int = 1,
+               timestep: float | None = None, log=None) -> Solver:
+    """The solver of `kind` for the scene's rigged trees."""
+    if kind is SolverKind.PLANAR:
         from .lod import PlanarLOD
 
-        return PlanarLOD(rigged.trees, rigged.qualities, scene, extent, workers, log)
+        return PlanarLOD(rigged.trees, rigged.qualities, scene, rigged.extent, workers, log)
     from .reference import ReferenceSolver
 
-    return ReferenceSolver(rigged.trees, scene, scene.quality, loads, log=log,
+    return ReferenceSolver(rigged.trees, scene, scene.quality, rigged.loads, log=log,
                            timestep=timestep)
-
-
-def simulate(solver: Solver, fps: float, progress=None) -> SolveResult:
-    """Run the solver; its result with the energy audit in its meta
-    (meta["energy"]) and the audit's warnings among its notes."""
-    result = solver.run(progress)
-    result.meta["energy"] = audit_motions(result.motions, fps)
-    result.notes = result.notes + gain_notes(result.meta["energy"])
-    return result
