@@ -46,9 +46,9 @@ sys.path.insert(0, str(ROOT))
 
 from treebake.accuracy import event_metrics  # noqa: E402
 from treebake.pipeline import bake_scene  # noqa: E402
-from treebake.sim.events import Event  # noqa: E402
-from treebake.scene import load_scene, parse_scene  # noqa: E402
 from treebake.quality import QUALITIES  # noqa: E402
+from treebake.scene import load_scene, parse_scene  # noqa: E402
+from treebake.sim.events import Event  # noqa: E402
 from treebake.sway import segment_ends  # noqa: E402
 
 G = 9.81

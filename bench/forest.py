@@ -93,10 +93,9 @@ def calibrate(log=print) -> dict:
 
     sys.path.insert(0, str(ROOT / "bench"))
     from production import tree_errors, unbreakable
-
     from treebake.pipeline import bake_scene
-    from treebake.scene import parse_scene
     from treebake.quality import QUALITIES
+    from treebake.scene import parse_scene
 
     with tempfile.TemporaryDirectory() as tmp:
         raw = forest_scene(50, 4.0, culled=False)

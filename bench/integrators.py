@@ -33,9 +33,8 @@ RULES = {"trapezoidal": (0.25, 0.5), "backward Euler": (0.5, 1.0)}
 
 
 def main() -> None:
-    from production import job_scene, tree_errors
-
     import treebake.sim.linear as linear
+    from production import job_scene, tree_errors
     from treebake.pipeline import bake_scene
     from treebake.quality import QUALITIES
 

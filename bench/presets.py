@@ -25,9 +25,9 @@ sys.path.insert(0, str(ROOT))
 
 from treebake.fileio import write_text
 from treebake.pipeline import bake_scene
+from treebake.quality import QUALITIES
 from treebake.scene import load_scene
 from treebake.sim.events import BROKE, UPROOTED
-from treebake.quality import QUALITIES
 
 
 def bench(path: Path, quality: str | None, solver: str = "planar", engine: str = "auto") -> dict:

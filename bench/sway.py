@@ -18,7 +18,6 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from test_physics_realism import ESTIMATE_BANDS, FIELD_BANDS, INTACT_CROWN_DAMPING
-
 from treebake.fileio import write_text
 from treebake.sway import pull_release
 

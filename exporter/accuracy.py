@@ -39,11 +39,11 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import atomic_path, write_text
-from .library import grammars_folder
 from .grow import grow
+from .library import grammars_folder
 from .pipeline import bake_scene
-from .scene import Scene, parse_scene
 from .quality import QUALITIES, Quality
+from .scene import Scene, parse_scene
 from .sway import segment_ends
 
 TRUTH_STEP = 1 / 2000  # s (the reference converges: 1/480 s is within 0.002 % of it on a spruce)

@@ -20,6 +20,7 @@ import numpy as np
 from . import library
 from .errors import InputError, SceneError
 from .names import MAX_TREE_NAME, is_valid, make_valid
+from .quality import QUALITIES, Quality
 from .scene_keys import (
     ATTRACTOR,
     BEAUFORT,
@@ -38,7 +39,6 @@ from .scene_keys import (
     WIND,
 )
 from .settings import Key
-from .quality import QUALITIES, Quality
 
 __all__ = ["BEAUFORT", "Scene", "load_job", "load_scene", "parse_scene"]
 

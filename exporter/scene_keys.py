@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 
 from .names import MAX_TREE_NAME
+from .quality import QUALITIES
 from .settings import Key, markdown, table
-from .quality import QUALITIES, Quality
 
 BEAUFORT = {  # m/s, lower bounds (WMO)
     "calm": 0.0, "light air": 0.3, "light breeze": 1.6, "gentle breeze": 3.4,

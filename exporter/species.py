@@ -124,8 +124,8 @@ def grown_rig(grammar: str | Path, seed: int | None = None, quality: str = "defa
     """The grammar's tree grown as a scene grows it (grow.grow) and
     rigged as sim.rigging rigs it at `quality`, standing at the origin."""
     from .grow import grow
-    from .scene import parse_scene
     from .quality import QUALITIES
+    from .scene import parse_scene
 
     tree = {"grammar": str(Path(grammar).resolve())}
     if seed is not None:

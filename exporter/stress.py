@@ -51,11 +51,11 @@ from .errors import SimulationError
 from .fileio import write_text
 from .library import grammar_path
 from .pipeline import bake_scene
+from .quality import QUALITIES
 from .rotations import angle_between
 from .scene import parse_scene
 from .sim.audit import GAIN_TOLERANCE
 from .sim.events import BROKE, CUT, UPROOTED
-from .quality import QUALITIES
 from .sway import segment_ends
 
 ENERGY_TOLERANCE = 0.10  # a window's peak kinetic energy may exceed the previous one's by 10 %

@@ -84,9 +84,9 @@ def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "d
     sway of the trunk top in the pull's direction (still air, gravity on)."""
     from .grow import grow
     from .pipeline import bake_scene
+    from .quality import QUALITIES
     from .rig import RigOptions, build_rig
     from .scene import parse_scene
-    from .quality import QUALITIES
 
     tree = {"grammar": str(Path(grammar).resolve())}
     if seed is not None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
 from treebake.bake import Bake, TreeBake
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene

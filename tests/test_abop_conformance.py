@@ -16,7 +16,6 @@ import math
 
 import numpy as np
 import pytest
-
 from treebake.lsystem import derive, format_modules, load_grammar
 from treebake.turtle import interpret
 

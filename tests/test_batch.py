@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from treebake.batch import load_jobs, run_batch
 from treebake.errors import SceneError
 

@@ -13,10 +13,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
 from conftest import need
-
 from treebake.export import ExportOptions, export_bake
 from treebake.names import joint_names
-
 
 
 def test_blender_frame_k_is_the_bakes_frame_k_for_glb_and_usd(tmp_path):

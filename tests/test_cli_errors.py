@@ -9,7 +9,6 @@ import sys
 import time
 
 import pytest
-
 from treebake.cli import main
 
 SAPLING = "grammars/sapling.lsys"

@@ -1,7 +1,6 @@
 """Derivation: parallel rewriting, all extensions together, and hard caps."""
 
 import pytest
-
 from treebake.errors import GrammarError, LimitError
 from treebake.lsystem import Limits, derive, derive_many, format_modules, parse_grammar
 

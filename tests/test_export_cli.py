@@ -5,7 +5,6 @@ import json
 
 import pytest
 from PIL import Image
-
 from treebake.cli import main
 
 ALL = "glb,gltf,obj,usd,usda,preview"

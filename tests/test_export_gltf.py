@@ -12,12 +12,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import NAMES, preset_bake
 from gltfread import Gltf, quat_to_matrix
-from validator import validate
-
 from treebake.exchange.anim import ReduceOptions
 from treebake.exchange.gltf import export_gltf
 from treebake.exchange.mesh import MeshOptions, tree_mesh
 from treebake.names import joint_names
+from validator import validate
 
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up
 

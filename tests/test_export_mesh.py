@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from treebake.library import grammar_path
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
@@ -16,7 +15,6 @@ from treebake.stress import cases
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import ROOT
-
 from treebake.bake import tree_bake_from_model
 from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
 from treebake.lsystem import derive, load_grammar

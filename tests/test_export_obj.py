@@ -14,7 +14,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
 from gltfread import Gltf
-
 from treebake.exchange.anim import ReduceOptions
 from treebake.exchange.gltf import export_gltf
 from treebake.exchange.mesh import MeshOptions, tree_mesh

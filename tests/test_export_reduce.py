@@ -4,7 +4,6 @@ smooth motion keeps few keys, noise keeps them all, quaternion keys stay
 in one hemisphere."""
 
 import numpy as np
-
 from treebake.exchange.anim import ReduceOptions, animate, continuous, reduce_keys
 
 

@@ -14,7 +14,6 @@ from pxr import Usd, UsdGeom, UsdSkel
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
-
 from treebake.exchange.mesh import pose, tree_mesh
 from treebake.exchange.usd import export_usd, validate
 

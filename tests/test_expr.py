@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-
 from treebake.errors import GrammarError
 from treebake.lsystem.expr import compile_expr, evaluate_constant
 

@@ -20,7 +20,6 @@ def test_every_fault_case_behaves_as_expected():
 @pytest.mark.parametrize("solver", ["planar", "full"])
 def test_the_other_stress_cases(solver):
     from test_accuracy_stability import STRESS
-
     from treebake.stress import ENERGY_TOLERANCE, GAP_TOLERANCE, cases, run
 
     for case in cases(long=False):

@@ -16,11 +16,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 from bakes import preset_bake
 from conftest import need
 from gltfread import Gltf
-from validator import three_check
-
 from treebake.export import ExportOptions, export_bake
 from treebake.names import joint_names
 from treebake.scene import parse_scene
+from validator import three_check
 
 ROOT = Path(__file__).resolve().parent.parent
 C = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # Z up -> Y up

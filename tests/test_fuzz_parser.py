@@ -7,7 +7,6 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from treebake.errors import GrammarError, LimitError
 from treebake.lsystem import Limits, derive, parse_grammar
 from treebake.turtle import interpret

@@ -7,7 +7,6 @@ import sys
 
 import pytest
 from conftest import ROOT
-
 from treebake.bake import save_bake
 from treebake.cli import main
 from treebake.pipeline import bake_scene

@@ -3,7 +3,6 @@
 import math
 
 import pytest
-
 from treebake.errors import GrammarError
 from treebake.lsystem import load_grammar, parse_grammar
 

@@ -33,7 +33,7 @@ def blast_scene(engine: str, duration: float):
 def bakes(request):
     scene = blast_scene(request.param, DURATION[request.param])
     back = bake_scene(scene)
-    stay = bake_scene(scene, quality=replace(scene.quality, hand_back=False))  # the engine to the end
+    stay = bake_scene(scene, quality=replace(scene.quality, hand_back=False))  # to the end
     return request.param, back, stay
 
 

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from treebake.grow import grow
 from treebake.pipeline import bake_scene
-from treebake.sim.rigging import rig_scene
+from treebake.quality import QUALITIES
 from treebake.scene import parse_scene
 from treebake.sim.common import Bones
 from treebake.sim.joint_space import JointSpace
 from treebake.sim.layout import ChainLayout
 from treebake.sim.loads import SceneLoads
-from treebake.quality import QUALITIES
+from treebake.sim.rigging import rig_scene
 from treebake.sim.treefactor import TreeFactor, ancestor_table, depths
 from treebake.sim.treesums import ChainSums
 

@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import pytest
-
 import treebake  # noqa: F401  (the package root: the public API)
 from treebake import library
 from treebake.cli import main

@@ -13,13 +13,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import preset_bake
 from conftest import need
-from validator import three_check
-
 from treebake.errors import SceneError
 from treebake.exchange.gltf import export_gltf
 from treebake.exchange.mesh import tree_mesh
 from treebake.names import is_valid, joint_name, joint_names
 from treebake.scene import parse_scene
+from validator import three_check
 
 ROOT = Path(__file__).resolve().parent.parent
 SAPLING = str(ROOT / "grammars" / "sapling.lsys")
@@ -57,7 +56,6 @@ def test_joint_names_are_identifiers_unique_in_the_file():
 def test_usd_joints_carry_the_same_names_in_the_tree_hierarchy(tmp_path):
     need("pxr")
     from pxr import Usd, UsdSkel
-
     from treebake.exchange.usd import export_usd
 
     bake = preset_bake("boxes")

@@ -18,7 +18,6 @@ import re
 
 import pytest
 from conftest import GRAMMARS
-
 from treebake.sway import pull_release
 
 FIELD_BANDS = {"spruce": (0.3, 0.7)}  # f1 Hz: Milne 1991 field data, scaled

@@ -12,7 +12,6 @@ omega*h <= s, with the substep h = 1/substep_rate and s = quality.stability."""
 
 import numpy as np
 import pytest
-
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
 from treebake.stress import joint_gap, kinetic_energy

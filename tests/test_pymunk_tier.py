@@ -7,14 +7,13 @@ import subprocess
 import sys
 
 import numpy as np
-
 from treebake.grow import grow
-from treebake.sim.rigging import rig_scene
+from treebake.quality import QUALITIES
 from treebake.rotations import rotvecs_from_matrices
 from treebake.scene import parse_scene
 from treebake.sim.chains import PymunkTier
 from treebake.sim.loads import SceneLoads
-from treebake.quality import QUALITIES
+from treebake.sim.rigging import rig_scene
 
 # a stem of four segments with a heavy side branch on its second
 GRAMMAR = ("density: 800\nmodulus: 8e9\ndamping: 0.05\n"

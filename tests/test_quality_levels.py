@@ -10,7 +10,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from simkit import BARE, bake_text, tip
-
 from treebake.accuracy import case_scene
 from treebake.pipeline import bake_scene
 from treebake.quality import QUALITIES

@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 from simkit import BARE, bake_text, tip
-
 from treebake.bake import save_bake
 from treebake.errors import SimulationError
 from treebake.lsystem import derive, load_grammar
@@ -211,8 +210,8 @@ def test_non_finite_loads_are_reported(root, monkeypatch):
 def test_timestep_and_force_rate_options(root):
     """Coarser steps for the accuracy report: whole force intervals per frame."""
     from treebake.grow import grow
-    from treebake.sim.rigging import rig_scene
     from treebake.sim.loads import SceneLoads
+    from treebake.sim.rigging import rig_scene
 
     scene = parse_scene(calm(str(root / "grammars" / "sapling.lsys")), file="<test>")
     loads = SceneLoads(scene)
@@ -307,10 +306,9 @@ def test_damping_is_each_limbs_mass_matrix_block(root):
     per limb, on a bent, moving sapling in a model with a projectile (whose
     free joint changes MuJoCo's sparse layout)."""
     import mujoco
-
     from treebake.grow import grow
-    from treebake.sim.rigging import rig_scene
     from treebake.sim.loads import SceneLoads
+    from treebake.sim.rigging import rig_scene
 
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 1.0,
            "projectile": [{"shape": "box", "size": 0.3, "mass": 5.0, "position": [-3.0, 0, 1.0],

@@ -3,7 +3,6 @@ name the file, the key, the value and the allowed range."""
 
 import pytest
 from conftest import PRESETS
-
 from treebake.errors import SceneError
 from treebake.scene import BEAUFORT, load_scene, parse_scene
 

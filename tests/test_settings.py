@@ -9,8 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-
-from treebake import docs_tables, scene_keys, settings
+from treebake import docs_tables, scene_keys
 from treebake.errors import GrammarError, SceneError
 from treebake.lsystem import parse_grammar
 from treebake.lsystem.settings import LSYSTEM, PHYSICS

@@ -16,7 +16,6 @@ import math
 import numpy as np
 import pytest
 from conftest import GRAMMARS
-
 from treebake import species
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene

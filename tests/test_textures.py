@@ -17,7 +17,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 from bakes import preset_bake
 from conftest import need
 from gltfread import Gltf
-
 from treebake.cli import main
 from treebake.exchange import textures
 from treebake.export import ExportOptions, export_bake

@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from treebake.errors import GrammarError
 from treebake.lsystem import derive, parse_grammar
 from treebake.turtle import interpret

@@ -30,8 +30,8 @@ import numpy as np
 from .. import __version__
 from ..bake import Bake
 from ..fileio import write_bytes
-from .anim import Animation, ReduceOptions, animate, subtree_reach
 from ..names import joint_names
+from .anim import Animation, ReduceOptions, animate, subtree_reach
 from .axes import points_y_up, quats_y_up
 from .mesh import TreeMesh, object_mesh
 from .textures import Texture

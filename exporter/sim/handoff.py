@@ -35,7 +35,9 @@ class Reason(StrEnum):
     CUT = "cut"  # its felling cut
     PROJECTILE = "projectile"  # a thrown object can reach it: it starts in the nonlinear engine
     BACK = "back"  # a nonlinear engine hands it back: in the linear range again
-    BLAST = "blast"  # (a HandOff.before_blast: the state a blast under way found it in)
+    BLAST = "blast"  # (a HandOff.restart: the state a blast under way found it in)
+    PAST_STRENGTH = "past strength"  # (a HandOff.restart: the start of the step in which a
+    # joint passed its strength)
 
 
 # trees taken for these may come back to the linear tier once back in its range
@@ -86,21 +88,21 @@ class HandOff:
     frame: int = -1
     work: float = 0.0
     step_length: float = 0.0
-    before_blast: HandOff | None = None
+    restart: HandOff | None = None
 
     def origin(self) -> HandOff:
-        """The state the next engine starts from: where the blast under way
-        found the tree, else here (with this hand-off's reason either way)."""
-        if self.before_blast is None:
+        """The state the next engine starts from: `restart`, else here
+        (with this hand-off's reason either way)."""
+        if self.restart is None:
             return self
-        return replace(self.before_blast, reason=self.reason, detail=self.detail,
-                       step_length=self.step_length, before_blast=None)
+        return replace(self.restart, reason=self.reason, detail=self.detail,
+                       step_length=self.step_length, restart=None)
 
     def offset_work(self, joules: float) -> HandOff:
         """The same hand-off with `joules` J added to its work (and its
         before-blast state's): a tier counts work from its own start."""
-        before = None if self.before_blast is None else self.before_blast.offset_work(joules)
-        return replace(self, work=self.work + joules, before_blast=before)
+        restart = None if self.restart is None else self.restart.offset_work(joules)
+        return replace(self, work=self.work + joules, restart=restart)
 
 
 @dataclass(frozen=True)

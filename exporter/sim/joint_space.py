@@ -177,7 +177,8 @@ class JointSpace:
                     + (ni * s1j[j]).sum(1) * pi_nj + ni_pj * s1n[j] - s0j[j] * ni_pj * pi_nj)
 
         def gravity_entry(i, j):
-            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j)), n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
+            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j));
+            # n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
             ni, nj, r = axis[i], axis[j], lever[j]
             return -((nj @ gravity) * (ni * r).sum(1) - (r @ gravity) * (ni * nj).sum(1))
 

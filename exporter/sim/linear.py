@@ -225,6 +225,7 @@ class LinearTier:
         h = self.h / self.parts
         while self.part < self.parts:
             q, v, a = self.q, self.v, self.a
+            self.part_start = (self.t, self.step, self.part, q, v, self.ledger.running.copy())
             q_pred = q + h * v + (0.5 - BETA) * h * h * a
             v_pred = v + (1 - GAMMA) * h * a
             t_end = self.step * self.h + (self.part + 1) * h
@@ -300,7 +301,7 @@ class LinearTier:
         """Keep each member tree's state at the start of the step in which a
         blast reaches the first of their bones, until BLAST_RING s after its
         push on the last is over: a nonlinear engine takes a tree that
-        leaves meanwhile from there (handoff.HandOff.before_blast; docs/
+        leaves meanwhile from there (handoff.HandOff.restart; docs/
         physics.md, "Taken during a blast, a tree starts from where the
         blast found it")."""
         if not meets(self.blast_windows, self.t, self.h, BLAST_RING):
@@ -362,6 +363,8 @@ class LinearTier:
         out = []
         quats, _ = pose_frames(b, q[None])
         rot_exact = matrices_from_quaternions(quats[0])[None]
+        broken = np.bincount(b.bone_tree, model.bending_moment(q) > b.strength,
+                             minlength=len(self.members)) > 0
         for ti_local, (reason, why_kind) in leaving.items():
             ti_local = int(ti_local)
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]
@@ -370,11 +373,14 @@ class LinearTier:
             self.last_frame[i] = self.step // self.spf if self.part else \
                 math.ceil(self.step / self.spf) - 1
             substep = int((self.step + self.part / self.parts) * self.ratio + 1e-9)
+            restart = self.before_blast.get(i)
+            if restart is None and broken[ti_local]:  # no engine takes a broken joint
+                restart = self._part_start(ti_local, i)
             out.append(HandOff(i, self.t, substep, q[2 * lo:2 * hi].copy(),
                                self.v[2 * lo:2 * hi].copy(), why_kind, reason,
                                rot_exact[0, lo:hi].copy(), kin[6:9, lo:hi].T.copy(),
                                work=float(self.ledger.running[i]), step_length=self.h,
-                               before_blast=self.before_blast.get(i)))
+                               restart=restart))
         keep = [k for k in range(len(self.members)) if k not in leaving]
         dof = np.concatenate([np.arange(2 * b.offsets[k], 2 * b.offsets[k + 1]) for k in keep]) \
             if keep else np.zeros(0, dtype=np.int64)
@@ -387,6 +393,21 @@ class LinearTier:
         # trees that stay in the linear tier")
         self.load_work.keep(dof[0::2] // 2)
         return out
+
+    def _part_start(self, ti_local: int, i: int) -> HandOff:
+        """Tree i (member ti_local) as the step (or its part) began that just
+        took one of its joints past its strength: where the nonlinear engine
+        takes it from, so that it, not this tier, integrates the step."""
+        t, step, part, q_all, v_all, running = self.part_start
+        lo, hi = self.bones.offsets[ti_local], self.bones.offsets[ti_local + 1]
+        kin = self.model.kinematics(q_all, v_all)
+        quats, _ = pose_frames(self.bones, q_all[None])
+        rot = matrices_from_quaternions(quats[0])
+        substep = int((step + part / self.parts) * self.ratio + 1e-9)
+        return HandOff(i, t, substep, q_all[2 * lo:2 * hi].copy(), v_all[2 * lo:2 * hi].copy(),
+                       Reason.PAST_STRENGTH, "as the step began in which a joint passed its "
+                       "strength", rot[lo:hi].copy(), kin[6:9, lo:hi].T.copy(),
+                       work=float(running[i]), step_length=self.h)
 
     def _per_tree(self, per_bone: np.ndarray) -> np.ndarray:
         """Per-bone values summed into the tier's tree numbering."""

@@ -16,11 +16,10 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
-
 from ..quality import Quality
 from ..scene import Scene
 from .common import SimTree
+from .loads import SceneLoads
 from .notes import solve_result
 from .progress import ChunkProgress
 from .scheduler import ChunkResult, simulate_chunk
@@ -53,26 +52,26 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
     return out
 
 
-def _run_chunk(trees, scene, quality, extent, log=None, progress=None) -> ChunkResult:
-    return simulate_chunk(trees, scene, quality, extent, log, progress)
+def _run_chunk(trees, scene, quality, loads, log=None, progress=None) -> ChunkResult:
+    return simulate_chunk(trees, scene, quality, loads, log, progress)
 
 
 def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene: Scene,
-             extent: np.ndarray, workers: int = 1, log=None,
+             loads: SceneLoads, workers: int = 1, log=None,
              progress=None) -> list[ChunkResult]:
     """Each chunk of `plan` through its tiers, in `workers` processes;
     `progress(done, total)` hears the planned work done (progress.py)."""
     tick = None if progress is None else ChunkProgress(trees, plan, scene, progress)
-    results = _simulate(trees, plan, scene, extent, workers, log, tick)
+    results = _simulate(trees, plan, scene, loads, workers, log, tick)
     if tick is not None:
         tick.finish()
     return results
 
 
-def _simulate(trees, plan, scene, extent, workers, log, progress) -> list[ChunkResult]:
+def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkResult]:
     workers = max(1, min(workers, len(plan)))
     if workers == 1:
-        return [_run_chunk([trees[i] for i in members], scene, q, extent, log,
+        return [_run_chunk([trees[i] for i in members], scene, q, loads, log,
                            None if progress is None else progress.chunk(k))
                 for k, (q, members) in enumerate(plan)]
     import multiprocessing as mp
@@ -80,7 +79,7 @@ def _simulate(trees, plan, scene, extent, workers, log, progress) -> list[ChunkR
 
     ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_run_chunk, [trees[i] for i in members], scene, q, extent)
+        futures = [pool.submit(_run_chunk, [trees[i] for i in members], scene, q, loads)
                    for q, members in plan]
         results = []
         for k, fut in enumerate(futures):
@@ -96,13 +95,13 @@ class PlanarLOD:
     for any number of workers."""
 
     def __init__(self, trees: list[SimTree], qualities: list[Quality], scene: Scene,
-                 extent: np.ndarray, workers: int = 1, log=None):
+                 loads: SceneLoads, workers: int = 1, log=None):
         self.trees, self.qualities, self.scene = trees, qualities, scene
-        self.extent, self.workers = extent, workers
+        self.loads, self.workers = loads, workers
         self.log = log or (lambda msg: None)
 
     def run(self, progress=None) -> SolveResult:
         plan = chunks(self.trees, self.qualities, whole=bool(self.scene.projectiles))
-        results = simulate(self.trees, plan, self.scene, self.extent, self.workers, self.log,
+        results = simulate(self.trees, plan, self.scene, self.loads, self.workers, self.log,
                            progress)
         return solve_result(self.trees, plan, results, self.scene)

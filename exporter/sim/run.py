@@ -63,7 +63,7 @@ def solver_for(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int
     if kind is SolverKind.PLANAR:
         from .lod import PlanarLOD
 
-        return PlanarLOD(rigged.trees, rigged.qualities, scene, rigged.extent, workers, log)
+        return PlanarLOD(rigged.trees, rigged.qualities, scene, rigged.loads, workers, log)
     from .reference import ReferenceSolver
 
     return ReferenceSolver(rigged.trees, scene, scene.quality, rigged.loads, log=log,

@@ -105,9 +105,9 @@ class Chunk:
     """The trees of one chunk, what moves them, and their records."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality,
-                 extent: np.ndarray, log=None, progress=None):
+                 loads: SceneLoads, log=None, progress=None):
         self.trees, self.scene, self.quality = trees, scene, quality
-        self.loads = SceneLoads(scene, extent)
+        self.loads = loads
         self.log = log or (lambda msg: None)
         self.progress = progress
         self.last_frame = scene.frame_count - 1
@@ -204,7 +204,7 @@ class Chunk:
         start = ho.origin()
         why = ho.detail if start is ho else (
             f"{ho.detail} at {ho.time:.3f} s; taken from {start.time:.3f} s, "
-            f"{ho.before_blast.detail}")
+            f"{ho.restart.detail}")
         self.work_before[i] = start.work
         if ho.reason is not Reason.BACK:
             self.records[i].switches.append(Event(start.time, self.trees[i].name, TIER, "",
@@ -270,10 +270,10 @@ def pymunk_tier(trees: list[SimTree], scene: Scene, quality: Quality, loads: Sce
     return tier
 
 
-def simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality, extent: np.ndarray,
+def simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                    log=None, progress=None) -> ChunkResult:
     """Every tree of a chunk through its tiers, from rest to the end."""
-    chunk = Chunk(trees, scene, quality, extent, log, progress)
+    chunk = Chunk(trees, scene, quality, loads, log, progress)
     queue = deque(chunk.first_runs())
     while queue:
         queue.extend(chunk.execute(queue.popleft()))

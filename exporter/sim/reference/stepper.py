@@ -34,8 +34,8 @@ from ..common import (
 )
 from ..events import TIER, Event
 from ..handoff import HandOff, Reason
-from ..range import BACK_DETAIL, RETURN_DETAIL, ReturnWatch, in_return_range
 from ..loads import SceneLoads, meets
+from ..range import BACK_DETAIL, RETURN_DETAIL, ReturnWatch, in_return_range
 from ..rules import BLAST_RING, BLAST_STEP, MAX_SPIN, exact_decay, limb_damping
 from .events import ReferenceEvents
 from .model import Group, ReferenceModels
@@ -97,6 +97,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         self.dt_force = self.h * self.force_every
         self.stats = Stats()
         self.timing = {"compile_seconds": 0.0, "step_seconds": 0.0, "update_seconds": 0.0}
+        self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
         self.events: list[Event] = []
         self._collect()
         # MuJoCo steps per step while a blast pushes or rings, and when, per tree (s)
@@ -432,7 +433,6 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         self.launched = np.zeros(n_proj, dtype=bool)
         self.any_damping = bool((self.alpha > 0).any())
         self.last_step = (frames - 1) * self.spf
-        self.step_times: list[float] = []  # s, physics time of each step (for benchmarks)
         self.hand_back = hand_back
         self.handed_back: list[HandOff] = []
         self.stopped = False  # at the last step, or handed back
