@@ -21,19 +21,13 @@ class TierPolicy(StrEnum):
 
 class NonlinearPolicy(StrEnum):
     """The engine for trees that leave the linear tier. AUTO: the engine
-    table (sim/handoff.py, docs/physics.md); REFERENCE: MuJoCo for every
-    reason; PYMUNK: the pymunk tier for every reason."""
+    table (sim/handoff.py, docs/physics.md: the MuJoCo reference for every
+    reason); REFERENCE: the same, said outright; PYMUNK: the pymunk tier for
+    every reason."""
 
     AUTO = "auto"
     REFERENCE = "reference"
     PYMUNK = "pymunk"
-
-
-class CutEngine(StrEnum):
-    """Under NonlinearPolicy.AUTO, the engine for a felled tree."""
-
-    PYMUNK = "pymunk"
-    REFERENCE = "reference"
 
 
 @dataclass(frozen=True)
@@ -51,9 +45,8 @@ class Quality:
     joint_correction (fraction of a joint's position error corrected per
     substep), coupling ("apparent" or "rigid": how a parent chain carries
     its children). bone_length: bones are merged segments at least this
-    fraction of the tree height (0: one bone per segment). tier, nonlinear,
-    cut_engine: which engine moves a tree (the enums above; strings are
-    converted). hand_back: a tree a nonlinear engine took for large motion
+    fraction of the tree height (0: one bone per segment). tier, nonlinear:
+    which engine moves a tree (the enums above; strings are converted). hand_back: a tree a nonlinear engine took for large motion
     or a joint near breaking comes back to the linear tier once back in
     its range (False: it stays)."""
 
@@ -71,13 +64,11 @@ class Quality:
     tier: TierPolicy = TierPolicy.AUTO
     nonlinear: NonlinearPolicy = NonlinearPolicy.AUTO
     reference_step: float = 1 / 480
-    cut_engine: CutEngine = CutEngine.PYMUNK
     hand_back: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "tier", TierPolicy(self.tier))
         object.__setattr__(self, "nonlinear", NonlinearPolicy(self.nonlinear))
-        object.__setattr__(self, "cut_engine", CutEngine(self.cut_engine))
 
 
 QUALITIES = {
@@ -85,7 +76,6 @@ QUALITIES = {
                      reference_step=1 / 240),
     "default": Quality("default", 960.0, 120.0, 10, 2, 0.0, linear_rate=24.0,
                        reference_step=1 / 480),
-    # cuts at `final` go to the reference (docs/physics.md, "Which engine takes a tree")
     "final": Quality("final", 1920.0, 240.0, 20, 2, 0.0, linear_rate=96.0, relinearise=0.2,
-                     reference_step=1 / 1000, cut_engine=CutEngine.REFERENCE),
+                     reference_step=1 / 1000),
 }

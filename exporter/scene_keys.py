@@ -199,14 +199,9 @@ QUALITY = table(
         "bone of it has turned this far from the pose they were taken at", "rad", None, 0.01,
         10.0, doc_default=_levels("relinearise")),
     Key("nonlinear", "the engine for trees that leave the linear range or that a projectile "
-        "can reach: `auto` (the engine table of docs/physics.md: the reference for large "
-        "motion, a joint near breaking and projectiles; the pymunk tier for ground contact; a "
-        "cut as `cut_engine` says), `reference` (MuJoCo for every reason) or `pymunk` (the "
-        "pymunk tier for every reason)",
+        "can reach: `auto` (the engine table of docs/physics.md: the MuJoCo reference), "
+        "`reference` (the same) or `pymunk` (the pymunk tier for every reason)",
         kind="choice", choices=("auto", "reference", "pymunk"), doc_default=_levels("nonlinear")),
-    Key("cut_engine", "under `nonlinear = auto`, the engine for a felled tree: `pymunk` or "
-        "`reference`", kind="choice", choices=("pymunk", "reference"),
-        doc_default=_levels("cut_engine")),
     Key("hand_back", "a tree a nonlinear engine took for large motion or a joint near "
         "breaking comes back to the linear tier once back in its range (`false`: it stays)",
         kind="bool", doc_default=_levels("hand_back")),

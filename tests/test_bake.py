@@ -94,7 +94,6 @@ def test_cli_bake_writes_the_bake_and_reports(root, tmp_path, capsys):
 
 
 def test_cli_timestep_is_the_full_references_step(root, tmp_path, capsys):
-    pytest.importorskip("mujoco")
     sapling = str(root / "grammars" / "sapling.lsys")
     assert main(["bake", sapling, "--timestep", "1/480", "-q"]) == 2  # planar: no such step
     assert "--solver full" in capsys.readouterr().err

@@ -14,12 +14,10 @@ from treebake.lsystem import derive, load_grammar
 from treebake.pipeline import bake_scene
 from treebake.rig import build_rig
 from treebake.scene import parse_scene
+from treebake.sim import reference
 from treebake.stress import kinetic_energy
 from treebake.sway import damping_ratio, frequency, segment_ends
 from treebake.turtle import interpret
-
-pytest.importorskip("mujoco")
-from treebake.sim import reference
 
 E, RHO, G = 8.0e9, 800.0, 9.81  # green wood (Pa, kg/m^3), gravity (m/s^2)
 

@@ -78,8 +78,9 @@ class LoadWork:
     def pending(self, point: np.ndarray) -> np.ndarray:
         """Per-bone work (J) the held force has done since its update, its
         points now at `point`: a frame between updates records it (else an
-        impulsive push, 50-100 J per 2 ms hold on a blasted sapling, shows
-        as a gain until the next update). Trapezoidal steps hold nothing."""
+        impulsive push shows as a gain until the next update; docs/physics.md,
+        "The audit's frames between load updates"). Trapezoidal steps hold
+        nothing."""
         if self.trapezoid or self.force is None or len(self.force) != len(point):
             return np.zeros(len(point))
         return (self.force * (point - self.point)).sum(1)

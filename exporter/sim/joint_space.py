@@ -15,16 +15,14 @@ inertia, children and parents coupled both ways), K_s the joint springs
 block of M times its alpha, the reference's form), F the external loads at
 the bones' centres of mass, m g gravity and tau_g0 the springs' prestress
 (gravity's torques at rest, so the grown shape is the equilibrium; 0
-without prestress). J(q)^T is evaluated at the current pose (a long branch
-swung by a gust carries its loads on turned lever arms: 7 % of its
-deflection at 0.13 rad, measured against the reference), with bone
+without prestress). J(q)^T is evaluated at the current pose (a branch
+swung by a gust carries its loads on turned lever arms), with bone
 rotations exp(sum of the hinge rotation vectors below them), exact for
 bending in one plane. M, C, gravity's stiffness K_g and the Jacobian that
 gives the bones' velocities from the hinge rates are taken at one pose:
 the grown shape, then the mean pose a tree has turned to (`linearise_at`,
-when the linear tier asks: a bamboo culm bent 0.8 rad by gusts had its
-error against the reference at 0.117 % of its height with them at rest,
-0.086 % taken again every 0.25 rad of its mean pose's turn).
+when the linear tier asks; docs/physics.md, "Linearised where the tree
+is").
 
 Implicit steps need the tangent of the right-hand side: K_s plus K_g,
 gravity's geometric stiffness (a hanging twig's pendulum

@@ -20,10 +20,12 @@ from .rules import FELL_NUDGE
 # CPU per segment and frame, relative to the linear tier's, at `default`
 # (docs/physics.md, "What each engine costs")
 COST = {Engine.LINEAR: 1.0, Engine.PYMUNK: 40.0, Engine.REFERENCE: 25.0}
-# a felled tree costs this much more once it turns fast (split steps), falls
-# free and meets the ground: from when it leans FAST_LEAN of its hinge angle
-FALLEN = 5.0
-FAST_LEAN = 0.25
+# a felled tree costs more once it falls (on the pymunk tier from when it
+# leans a quarter of its hinge angle: its steps split for the fast turn; on
+# the reference from when its hinge snaps): IMPACT times as much for
+# IMPACT_TIME s (the fall, the breaks, the parts on the ground), then LYING
+FAST_LEAN = {Engine.PYMUNK: 0.25, Engine.REFERENCE: 1.0}
+IMPACT, IMPACT_TIME, LYING = 7.0, 3.0, 3.0
 
 
 class ChunkProgress:
@@ -70,11 +72,13 @@ class ChunkPlan:
         self.cost = COST[start] * self.size
         for i, t in enumerate(trees):
             if t.cut is not None:  # known: it leaves for the cut's engine then, and falls
+                engine = engine_for(Reason.CUT, quality)
                 f = min(frames - 1, int(t.cut.time * scene.fps))
-                fall = min(frames - 1, int((t.cut.time + lean_time(t, scene, FAST_LEAN))
-                                          * scene.fps))
-                self.size[i, fall:] *= FALLEN
-                self.cost[i, f:] = COST[engine_for(Reason.CUT, quality)] * self.size[i, f:]
+                fall = t.cut.time + lean_time(t, scene, FAST_LEAN[engine])
+                rest = min(frames - 1, int((fall + IMPACT_TIME) * scene.fps))
+                self.size[i, min(frames - 1, int(fall * scene.fps)):rest] *= IMPACT
+                self.size[i, rest:] *= LYING
+                self.cost[i, f:] = COST[engine] * self.size[i, f:]
         self.cost[:, 0] = 0.0  # frame 0 is the rest pose
 
     @property
