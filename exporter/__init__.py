@@ -14,8 +14,9 @@ Imports are lazy: `import treebake` loads no simulation code.
 
 __version__ = "0.2.0"
 
+from . import library  # noqa: E402  (the bundled grammars and presets; loads nothing heavy)
 from .api import bake_scene, export_bake, load_bake, load_scene, save_bake  # noqa: E402
 from .errors import InputError, TreebakeError  # noqa: E402
 
-__all__ = ["InputError", "TreebakeError", "bake_scene", "export_bake", "load_bake",
+__all__ = ["InputError", "TreebakeError", "bake_scene", "export_bake", "library", "load_bake",
            "load_scene", "save_bake", "__version__"]

@@ -331,13 +331,31 @@ def load_bake(path: str | Path) -> Bake:
                                       z["objects.positions"], z["objects.rotations"])
             bake = Bake(z["times"], trees, meta, objects)
             _check_shapes(bake)
-            return bake
     except InputError:
         raise
     except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError, ValueError, TypeError,
             IndexError, AttributeError) as exc:
         raise InputError(f"{p}: not a readable treebake bake: damaged or truncated "
                          f"({type(exc).__name__}: {exc})") from None
+    check_finite(bake, str(p))
+    return bake
+
+
+def check_finite(bake: Bake, where: str = "the bake") -> None:
+    """Raise InputError if any tree's positions or rotations (frames and
+    sub-frame samples) hold NaN or infinity: junk to diff or export, named
+    with the tree and the first frame."""
+    for t in bake.trees:
+        for what, frames in (("positions", t.positions), ("rotations", t.rotations),
+                             ("sub-frame positions", t.extra_positions),
+                             ("sub-frame rotations", t.extra_rotations)):
+            if not len(frames):
+                continue
+            bad = ~np.isfinite(frames).reshape(len(frames), -1).all(axis=1)
+            if bad.any():
+                raise InputError(f"{where}: tree {t.name!r} has non-finite {what} from "
+                                 f"{'sample' if 'sub' in what else 'frame'} "
+                                 f"{int(np.argmax(bad))} on: a broken bake")
 
 
 def _check_shapes(bake: Bake) -> None:

@@ -151,6 +151,8 @@ def load_jobs(path: str | Path) -> list[Job]:
         raise _fail(file, "(file)", f"cannot read job file: {exc.strerror}") from None
     except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise _fail(file, "(syntax)", str(exc)) from None
+    except RecursionError:  # arrays or tables nested hundreds deep
+        raise _fail(file, "(syntax)", "nested too deep to be a job file") from None
     for k in raw:
         if k not in ("defaults", "job", "product"):
             raise _fail(file, k, "unknown key (allowed: defaults, job, product)")

@@ -32,6 +32,7 @@ __all__ = ["ACCURACY_SCENARIOS", "ACCURACY_SPECIES", "COMMANDS", "EXAMPLES", "ST
 
 
 def main(argv: list[str] | None = None) -> int:
+    _closed_streams_to_devnull()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -57,6 +58,16 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "verbose", False):
         print(f"done in {time.perf_counter() - start:.2f} s", file=sys.stderr)
     return code
+
+
+def _closed_streams_to_devnull() -> None:
+    """A command run with stdout or stderr closed (`>&-`, `2>&-`) still does
+    its work: what it would print goes to /dev/null."""
+    import os
+
+    for name in ("stdout", "stderr"):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))
 
 
 def _silence_stdout() -> None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__
-from .bake import Bake
+from .bake import Bake, check_finite
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
@@ -187,6 +187,7 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         raise InputError("no export format given")
     if not bake.trees:
         raise InputError("the bake has no trees")
+    check_finite(bake)  # never a file full of NaN
     name = name or str(bake.meta.get("scene") or "bake")
     if not name or any(c in name for c in "/\\") or name in (".", ".."):
         raise InputError(f"job name {name!r} cannot be a folder name")

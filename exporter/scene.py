@@ -272,6 +272,8 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
         raise SceneError("(file)", "not valid UTF-8", str(p)) from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError("(syntax)", str(exc), str(p)) from None
+    except RecursionError:  # arrays or tables nested hundreds deep
+        raise SceneError("(syntax)", "nested too deep to be a scene", str(p)) from None
     digest = hashlib.sha256(data)
     if overrides:
         raw = dict(raw)
@@ -295,6 +297,8 @@ def load_job(path: str | Path, overrides: dict | None = None) -> Scene:
     overrides = dict(overrides or {})
     if p.suffix != ".lsys":
         return load_scene(p, overrides)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a grammar file")
     if not p.is_file():
         raise InputError(f"{p}: grammar file not found")
     raw = {"name": p.stem, "tree": [{"grammar": str(p.resolve())}],

@@ -171,3 +171,39 @@ def test_help_describes_the_solvers_and_engines_there_are(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["stability", "--engine", "articulated"])
     assert exc.value.code == 2 and "invalid choice: 'articulated'" in capsys.readouterr().err
+
+
+def test_nesting_too_deep_is_a_scene_error_not_a_traceback(tmp_path):
+    """A scene or job file with arrays nested 900 deep hit Python's
+    recursion limit inside the TOML reader: a traceback, exit 1."""
+    deep = "[" * 900 + "1" + "]" * 900
+    for command, name in (("bake", "deep.toml"), ("batch", "jobs.toml")):
+        path = tmp_path / name
+        path.write_text(f"duration = {deep}\n")
+        r = run(command, path, "--out", tmp_path / "out")
+        assert r.returncode == 2, r.stderr
+        assert "nested too deep" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_a_folder_given_as_a_grammar_says_so(tmp_path):
+    folder = tmp_path / "oak.lsys"
+    folder.mkdir()
+    r = run("bake", folder, "--out", tmp_path / "out")
+    assert r.returncode == 2 and "is a folder, not a grammar file" in r.stderr, r.stderr
+
+
+def test_closed_stdout_or_stderr_is_no_traceback(root, tmp_path):
+    """`treebake bake ... >&-` wrote its files, then failed to flush a
+    closed stdout (exit 1); `2>&-` crashed before any work."""
+    out = tmp_path / "out"
+    for closed in (1, 2):
+        done = subprocess.run([sys.executable, "-m", "treebake.cli", "bake", str(root / SAPLING),
+                               *QUICK, "--out", str(out)], stdin=subprocess.DEVNULL,
+                              **{("stdout" if closed == 1 else "stderr"): subprocess.DEVNULL},
+                              check=False, close_fds=True,
+                              preexec_fn=lambda c=closed: os.close(c))
+        assert done.returncode == 0
+        assert (out / "sapling" / "sapling.npz").is_file()
+    bad = subprocess.run([sys.executable, "-m", "treebake.cli", "bake", str(tmp_path / "no.lsys")],
+                         stdout=subprocess.DEVNULL, check=False, preexec_fn=lambda: os.close(2))
+    assert bad.returncode == 2

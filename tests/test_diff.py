@@ -95,6 +95,24 @@ MADE_BEFORE = {"treebake": "0.1.0", "numpy": "2.3.0", "mujoco": "3.13.0", "pymun
 MADE_AFTER = {**MADE_BEFORE, "numpy": "2.4.6", "mujoco": "4.0.0"}
 
 
+@pytest.mark.parametrize("what", ["positions", "rotations"])
+def test_a_bake_with_nan_is_refused_by_diff_and_export(bake, tmp_path, capsys, what):
+    """A bake whose motion turned NaN from frame 5 on is broken: diff must
+    not call it within tolerance (it did: "max nan m", exit 0) and export
+    must not write a glb full of NaN; both refuse it, naming tree and frame."""
+    ref, broken = tmp_path / "ref.npz", tmp_path / "nan.npz"
+    save_bake(bake, ref)
+    bad = copy.deepcopy(bake)
+    getattr(bad.trees[0], what)[5:] = np.nan
+    save_bake(bad, broken)
+    assert main(["diff", str(ref), str(broken)]) == 2
+    err = capsys.readouterr().err
+    assert f"non-finite {what} from frame 5" in err and bake.trees[0].name in err, err
+    assert main(["export", str(broken), "--format", "glb", "--out", str(tmp_path)]) == 2
+    assert f"non-finite {what} from frame 5" in capsys.readouterr().err
+    assert not list(tmp_path.rglob("*.glb"))
+
+
 def test_version_differences_name_each_change_and_unknown_sides():
     from treebake.versions import runtime_versions, version_differences
 

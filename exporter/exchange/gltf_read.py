@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bake import Bake, TreeBake
+from ..bake import Bake, TreeBake, check_finite
 from ..errors import InputError
 from ..rotations import (
     apply,
@@ -211,7 +211,9 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
     meta = {"fps": grid.fps, "scene": p.stem, "source": str(p)}
     if isinstance(info.get("reduction"), dict):
         meta["reduction"] = info["reduction"]
-    return Bake(grid.times, trees, meta)
+    bake = Bake(grid.times, trees, meta)
+    check_finite(bake, str(path))
+    return bake
 
 
 def _channels(doc: dict, blob: bytes) -> tuple[dict, list[np.ndarray]]:

@@ -71,8 +71,9 @@ def _kind_line(kind: str, events: list[Event]) -> str:
     one, many = _WHAT[kind]
     when = f"at {first:.2f} s" if len(events) == 1 else f"between {first:.2f} and {last:.2f} s"
     if kind == TIER:
-        count = "once" if len(events) == 1 else f"{len(events)} times"
-        return f"{one} {count} {when} (first: {events[0].detail})"
+        if len(events) == 1:
+            return f"{one} {when} ({events[0].detail})"
+        return f"{one} {len(events)} times {when} (first: {events[0].detail})"
     if kind in (BROKE,) or len(events) > 1:
         return f"{len(events)} {one if len(events) == 1 else many} {when}"
     return f"{one} {when}" + (f" ({events[0].detail})" if events[0].detail else "")
