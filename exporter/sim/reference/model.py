@@ -6,9 +6,10 @@ One body per bone, nested as the rig's bones are, its frame at the bone's
 pivot with the world's orientation at rest (so its pose is the bake's);
 mass, COM and full inertia are the rig's. The joint at a bone's base is two
 hinges perpendicular to the bone (common.hinge_axes), each with the rig's
-stiffness and range +-cone. A capsule per bone collides with the ground
-(where the scene has one) and with projectiles (docs/physics.md, "The
-reference")."""
+stiffness and range +-cone. A capsule per bone collides with projectiles,
+and with the ground where the scene has one and something can fall (a
+cut, projectiles, breakable joints) or the tree came for its tips at the
+ground (docs/physics.md, "The reference")."""
 
 from __future__ import annotations
 
@@ -154,11 +155,14 @@ class ReferenceModels:
             shared = [ti for ti, t in enumerate(self.trees)
                       if projectile_reaches(scene, t.rig.model)]
         self.groups: list[Group] = []
+        falls = bool(scene.projectiles) or any(t.cut is not None for t in self.trees)
         for ti in range(len(self.trees)):
             if ti in shared:
                 continue
             bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
-            self.groups.append(Group([ti], bones, False, scene.ground))
+            ground = scene.ground and (self.touch_ground or falls
+                                       or bool(self.breakable[bones].any()))
+            self.groups.append(Group([ti], bones, False, ground))
         if projectiles:
             bones = np.concatenate([np.arange(self.offsets[ti], self.offsets[ti + 1])
                                     for ti in shared] + [_ints()])

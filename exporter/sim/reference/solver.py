@@ -12,7 +12,7 @@ import numpy as np
 from ...quality import Quality
 from ...scene import Scene
 from ..common import ProjectileTracks, SimTree, cap_note
-from ..handoff import Engine, HandOff, TierReport
+from ..handoff import Engine, HandOff, Reason, TierReport
 from ..loads import SceneLoads
 from ..rules import BLAST_RING, BLAST_STEP, MAX_SPIN, broken_note
 from ..solver import SolveResult, frame_timing
@@ -97,7 +97,9 @@ class ReferenceTier:
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  start: HandOff | None = None, hand_back: float | None = None, log=None):
         self.engine = ReferenceEngine(trees, scene, quality, loads, log=log,
-                                      timestep=quality.reference_step)
+                                      timestep=quality.reference_step,
+                                      touch_ground=start is not None
+                                      and start.reason is Reason.GROUND)
         if start is None:
             self.engine.begin()
         else:

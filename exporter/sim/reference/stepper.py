@@ -79,12 +79,16 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
     DEFAULT_FORCE_RATE; inf = every step) is how often the loads are
     evaluated (the damping is every MuJoCo step). A model's step is split
     to at most rules.BLAST_STEP while a blast pushes its trees and their
-    twigs ring (BLAST_RING). `quality` is only recorded: the rig's bones
-    are already merged by it."""
+    twigs ring (BLAST_RING). `touch_ground`: the ground stops the trees
+    even where nothing can fall (a tree handed over for its tips at the
+    ground). `quality` is only recorded: the rig's bones are already merged
+    by it."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None, timestep: float | None = None, force_rate: float | None = None):
+                 log=None, timestep: float | None = None, force_rate: float | None = None,
+                 touch_ground: bool = False):
         self.scene, self.quality, self.loads = scene, quality, loads
+        self.touch_ground = touch_ground  # the ground stops its trees even if nothing can fall
         self.log = log or (lambda msg: None)
         self.trees = [t for t in trees if t.active]
         target = timestep or DEFAULT_TIMESTEP
