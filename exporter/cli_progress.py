@@ -110,8 +110,8 @@ class BatchDisplay:
         if event == "start":
             self.running[data] = "starting"
         elif event == "progress":
-            name, done, frames = data
-            self.running[name] = f"{done}/{frames}"
+            name, done, total = data  # growing numbers in any unit: the share is done
+            self.running[name] = f"{100 * done / total:.0f} %" if total else "starting"
         elif event == "retry":
             self._line(f"[{self.finished}/{self.total}] {data[0]}: {data[1]}")
         elif event == "end":

@@ -46,9 +46,10 @@ class Quality:
     substep), coupling ("apparent" or "rigid": how a parent chain carries
     its children). bone_length: bones are merged segments at least this
     fraction of the tree height (0: one bone per segment). tier, nonlinear:
-    which engine moves a tree (the enums above; strings are converted). hand_back: a tree a nonlinear engine took for large motion
-    or a joint near breaking comes back to the linear tier once back in
-    its range (False: it stays)."""
+    which engine moves a tree (the enums above; strings are converted).
+    hand_back: a tree a nonlinear engine took for large motion or a joint
+    near breaking comes back to the linear tier once back in its range
+    (False: it stays)."""
 
     name: str = "default"
     substep_rate: float = 960.0

@@ -383,6 +383,13 @@ def _array(r: _Reader, raw: dict, key: str) -> list[dict]:
     return v
 
 
+REMOVED_QUALITY_KEYS = {  # keys of older scenes, and what became of them
+    "cut_engine": "every cut goes to the MuJoCo reference (`nonlinear = \"pymunk\"` for the "
+                  "pymunk tier; docs/physics.md, \"Which engine takes a tree\")",
+    "articulated_step": "the articulated tier is gone (MuJoCo is a dependency)",
+}
+
+
 def _quality(r: _Reader, q: Any) -> Quality:
     if isinstance(q, str):
         if q not in QUALITIES:
@@ -390,6 +397,13 @@ def _quality(r: _Reader, q: Any) -> Quality:
         return QUALITIES[q]
     q = r.table(q, "quality")
     p = "quality."
+    for key, why in REMOVED_QUALITY_KEYS.items():
+        if key in q:
+            raise r.fail(f"{p}{key}", f"removed in treebake 0.2: {why}")
+    if q.get("nonlinear") == "articulated":
+        raise r.fail(f"{p}nonlinear", "= 'articulated': removed in treebake 0.2 with the "
+                     "articulated tier (MuJoCo is a dependency; docs/physics.md, \"Which engine "
+                     "takes a tree\")")
     r.check_keys(q, p, QUALITY)
     base = QUALITIES[r.key(q, QUALITY["base"], p)]
     # every key defaults to the base level's value

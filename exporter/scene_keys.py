@@ -185,7 +185,7 @@ def _levels(name: str) -> str:
     return " / ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
 
 
-# defaults come from the `base` level (sim/quality.py); `default_of` gives them
+# defaults come from the `base` level (quality.py)
 QUALITY = table(
     Key("base", "the level the table starts from", kind="choice", default="default",
         choices=LEVELS),

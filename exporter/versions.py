@@ -18,8 +18,13 @@ UNKNOWN = "unknown"  # a side that records no version (a bake older than version
 
 @functools.lru_cache(maxsize=1)
 def _installed() -> tuple[tuple[str, str], ...]:
+    from . import __version__  # the code that runs, even from a source checkout
+
     found = []
     for name in DISTRIBUTIONS:
+        if name == "treebake":
+            found.append((name, __version__))
+            continue
         try:
             found.append((name, metadata.version(name)))
         except metadata.PackageNotFoundError:

@@ -610,3 +610,26 @@ def test_a_box_into_a_sapling_at_draft_on_the_pymunk_tier_makes_no_energy(root):
     assert sum(e["kind"] in ("broke", "uprooted") for e in tree.info["events"]) >= 5
     assert b.meta["energy"]["sapling"]["max_gain_fraction"] < GAIN_TOLERANCE
     assert any("960 Hz" in n for n in b.meta["notes"]), b.meta["notes"]
+
+
+def test_a_tree_no_projectile_reaches_is_handed_over_without_one(root):
+    """A crate thrown at one sapling while another, 40 m away, is pulled out
+    of the linear range: the second goes to the reference without the
+    projectiles (a copy of them, thrown late from where they started,
+    overwrote the bake's flight and kept the tree from coming back), comes
+    back once released, and the bake's projectile flight is that of the
+    run that threw it: the same as with the first sapling alone."""
+    sapling = str(root / "grammars" / "sapling.lsys")
+    box = {"shape": "box", "size": 0.3, "mass": 20.0, "position": [-2.0, 0.0, 1.5],
+           "velocity": [9.0, 0.0, 1.0], "time": 0.1}
+    both = {"duration": 4.0, "fps": 24, "projectile": [box],
+            "tree": [{"grammar": sapling}, {"grammar": sapling, "position": [40.0, 0.0]}],
+            "pull": [{"tree": 1, "force": [100.0, 0.0, 0.0], "ramp": 1.0, "release": 1.0,
+                      "at": 0.9}]}  # past 80 % of a joint's strength at 0.9 s, not past it
+    alone = {**both, "tree": both["tree"][:1], "pull": []}
+    b = bake_scene(parse_scene(both, file="<both>"))
+    a = bake_scene(parse_scene(alone, file="<alone>"))
+    far = b.trees[1].info["solver"]
+    assert far.startswith("linear, then reference from ") and ", then linear from " in far, far
+    assert np.array_equal(b.objects.positions, a.objects.positions)
+    assert b.objects.positions[-1, 0, 0] > 0.0  # thrown, from -2 m on

@@ -14,7 +14,7 @@ HINGE = "hinge snapped"  # felling: the hinge wood broke, the stem falls free
 BROKE = "broke"  # a joint's bending moment passed its strength
 UPROOTED = "uprooted"  # a root joint broke
 AT_REST = "at rest"  # a fallen tree or a still one went to sleep
-TIER = "tier"  # the planar LOD moved a tree between its linear and pymunk tiers
+TIER = "tier"  # the planar LOD moved a tree from one engine to another
 KINDS = (CUT, HINGE, BROKE, UPROOTED, AT_REST, TIER)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..quality import NonlinearPolicy, Quality, TierPolicy
 from .common import ProjectileTracks, TreeMotion
+from .range import BREAK_MARGIN, CONE_FRACTION, MAX_TURN
 from .rules import HIT_SUBSTEP_RATE
 
 
@@ -28,10 +29,10 @@ class Reason(StrEnum):
     """Why a tree leaves the linear tier (checked in this order, linear.py),
     or why an engine hands it back."""
 
-    NEAR_BREAK = "break"  # a joint's moment past linear.BREAK_MARGIN of its strength
+    NEAR_BREAK = "break"  # a joint's moment past range.BREAK_MARGIN of its strength
     GROUND = "ground"  # a branch tip reached the ground
-    TURN = "turn"  # a bone turned past linear.MAX_TURN from its grown pose
-    CONE = "cone"  # a hinge past linear.CONE_FRACTION of its cone
+    TURN = "turn"  # a bone turned past range.MAX_TURN from its grown pose
+    CONE = "cone"  # a hinge past range.CONE_FRACTION of its cone
     CUT = "cut"  # its felling cut
     PROJECTILE = "projectile"  # a thrown object can reach it: it starts in the nonlinear engine
     BACK = "back"  # a nonlinear engine hands it back: in the linear range again
@@ -61,7 +62,8 @@ def engine_for(reason: Reason, quality: Quality) -> Engine:
 @dataclass(frozen=True)
 class HandOff:
     """A tree leaving a tier at `time` s = `substep` pymunk substeps from
-    t = 0 (the pymunk tier starts there), with its state: hinge angles `q`
+    t = 0 (the pymunk tier starts there; -1 where it has no meaning: a
+    hand-back to the linear tier, which starts at `frame`), with its state: hinge angles `q`
     and rates `v` (2B,) rad and rad/s from the grown shape; rotations
     relative to rest `rot` (B, 3, 3) and world spins `omega` (B, 3) rad/s
     (None where the tier does not have them: a hand-back). `frame`: the
@@ -95,7 +97,7 @@ class HandOff:
 
     def offset_work(self, joules: float) -> HandOff:
         """The same hand-off with `joules` J added to its work (and its
-        before-blast state's): a tier counts work from its own start."""
+        restart's): a tier counts work from its own start."""
         restart = None if self.restart is None else self.restart.offset_work(joules)
         return replace(self, work=self.work + joules, restart=restart)
 
@@ -145,9 +147,10 @@ class TierReport:
 
 
 LEAVING = {  # what each reason means, for the docs' engine table
-    Reason.TURN: "range: a bone turned past 1 rad from its grown pose",
-    Reason.CONE: "range: a hinge past 90 % of its cone",
-    Reason.NEAR_BREAK: "a joint's moment past 80 % of its strength (it may break)",
+    Reason.TURN: f"range: a bone turned past {MAX_TURN:g} rad from its grown pose",
+    Reason.CONE: f"range: a hinge past {CONE_FRACTION:.0%} of its cone",
+    Reason.NEAR_BREAK: f"a joint's moment past {BREAK_MARGIN:.0%} of its strength (it may "
+                       "break)",
     Reason.GROUND: "a branch tip reached the ground",
     Reason.CUT: "its felling cut",
     Reason.PROJECTILE: "a thrown object can reach it (from the start)",

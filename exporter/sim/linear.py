@@ -12,7 +12,7 @@ bone's tip; past ERROR_TOLERANCE of the tree's height the steps are split
 in two from then on. Once a bone of the trees' mean pose (over MEAN_TIME)
 has turned the quality's `relinearise` from the pose the system was
 linearised at, it is linearised again there. A tree leaves the tier the
-step it leaves the linear range (range.leaving), with its pose, spin and
+step it leaves the linear range (range.py; `_leaving`), with its pose, spin and
 hinge state (handoff.HandOff). docs/physics.md, "The linear tier", has the
 derivations and the measurements behind each constant.
 """
@@ -334,8 +334,9 @@ class LinearTier:
         tip_z = pose.pivot[2] + (pose.rot[2] * self.tip_arm).sum(0)
         # in order of precedence: an event (near breaking, at the ground)
         # decides the engine before large motion does
+        moment = model.bending_moment(q)
         checks = (
-            (model.bending_moment(q) > BREAK_MARGIN * b.strength, Reason.NEAR_BREAK,
+            (moment > BREAK_MARGIN * b.strength, Reason.NEAR_BREAK,
              f"a joint past {BREAK_MARGIN:.0%} of its strength"),
             (self.scene.ground & (tip_z < b.radius + CONTACT_MARGIN)
              & (tip_z < self.tip_rest - 1e-3), Reason.GROUND, "a tip reached the ground"),
@@ -363,8 +364,7 @@ class LinearTier:
         out = []
         quats, _ = pose_frames(b, q[None])
         rot_exact = matrices_from_quaternions(quats[0])[None]
-        broken = np.bincount(b.bone_tree, model.bending_moment(q) > b.strength,
-                             minlength=len(self.members)) > 0
+        broken = np.bincount(b.bone_tree, moment > b.strength, minlength=len(self.members)) > 0
         for ti_local, (reason, why_kind) in leaving.items():
             ti_local = int(ti_local)
             lo, hi = b.offsets[ti_local], b.offsets[ti_local + 1]

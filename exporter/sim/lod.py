@@ -52,10 +52,6 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
     return out
 
 
-def _run_chunk(trees, scene, quality, loads, log=None, progress=None) -> ChunkResult:
-    return simulate_chunk(trees, scene, quality, loads, log, progress)
-
-
 def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene: Scene,
              loads: SceneLoads, workers: int = 1, log=None,
              progress=None) -> list[ChunkResult]:
@@ -71,7 +67,7 @@ def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene:
 def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkResult]:
     workers = max(1, min(workers, len(plan)))
     if workers == 1:
-        return [_run_chunk([trees[i] for i in members], scene, q, loads, log,
+        return [simulate_chunk([trees[i] for i in members], scene, q, loads, log,
                            None if progress is None else progress.chunk(k))
                 for k, (q, members) in enumerate(plan)]
     import multiprocessing as mp
@@ -79,7 +75,7 @@ def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkRe
 
     ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(_run_chunk, [trees[i] for i in members], scene, q, loads)
+        futures = [pool.submit(simulate_chunk, [trees[i] for i in members], scene, q, loads)
                    for q, members in plan]
         results = []
         for k, fut in enumerate(futures):

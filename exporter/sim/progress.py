@@ -80,6 +80,7 @@ class ChunkPlan:
                 self.size[i, rest:] *= LYING
                 self.cost[i, f:] = COST[engine] * self.size[i, f:]
         self.cost[:, 0] = 0.0  # frame 0 is the rest pose
+        self.counted = np.zeros(len(trees), dtype=np.int64)  # per tree, frames done
 
     @property
     def planned(self) -> float:
@@ -92,9 +93,13 @@ class ChunkPlan:
         self.owner.tell()
 
     def tick(self, engine: Engine, trees: list[int], frame: int) -> None:
-        """`engine` stepped `trees` to `frame`."""
-        if frame > 0:
-            self.owner.done += float(self.cost[trees, frame].sum())
+        """`engine` stepped `trees` to `frame` (a frame counts once per tree:
+        a run that starts before frames already done, after a restart or a
+        failed reference run, does them again unpaid)."""
+        new = [i for i in trees if frame > self.counted[i]]
+        if new:
+            self.counted[new] = frame
+            self.owner.done += float(self.cost[new, frame].sum())
             self.owner.tell()
 
 

@@ -21,19 +21,14 @@ class RiggedScene:
     """The scene's trees as the simulation takes them (in scene order), each
     tree's quality level, why each static one is left out (by name), how
     many trees each rule left out or coarsened ("unseen", "far",
-    "no_force"), the scene's loads and the horizontal box the trees stand in
-    ((xmin, ymin), (xmax, ymax)) m, widened by MARGIN."""
+    "no_force"), and the scene's loads (its wind synthesised over the box
+    the trees stand in, widened by MARGIN)."""
 
     trees: list[SimTree]
     qualities: list[Quality]
     static: dict[str, str]
     culled: dict[str, int]
     loads: SceneLoads
-    extent: np.ndarray
-
-    @property
-    def active(self) -> list[SimTree]:
-        return [t for t in self.trees if t.active]
 
 
 MARGIN = 20.0  # m around the trees where the wind's turbulence is synthesised
@@ -57,8 +52,7 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
                  np.array([0.5 * float(np.linalg.norm(hi - lo)) for lo, hi in box]))
         seen, far = c.seen, c.nearest > scene.camera.far
     lo, hi = np.min([b[0] for b in box], axis=0), np.max([b[1] for b in box], axis=0)
-    extent = np.array([lo[:2] - MARGIN, hi[:2] + MARGIN])
-    loads = SceneLoads(scene, extent)
+    loads = SceneLoads(scene, np.array([lo[:2] - MARGIN, hi[:2] + MARGIN]))
     cuts = {c.tree: c for c in scene.cuts}
     pulls: dict[int, list] = {}
     for p in scene.pulls:
@@ -70,7 +64,7 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
                for i, (g, b) in enumerate(zip(grown, box))]
     direction = [loads.dominant_direction(g.model.points[0], cuts.get(i), pulls.get(i, []))
                  for i, g in enumerate(grown)]
-    out = RiggedScene([], [], {}, {"unseen": 0, "far": 0, "no_force": 0}, loads, extent)
+    out = RiggedScene([], [], {}, {"unseen": 0, "far": 0, "no_force": 0}, loads)
     for i, g in enumerate(grown):
         q = quality or (QUALITIES[g.spec.quality] if g.spec.quality else scene.quality)
         if far[i] and quality is None and g.spec.quality is None and not scene.projectiles:

@@ -44,6 +44,8 @@ def limb_damping(mass: np.ndarray, rate: np.ndarray, same_limb=True) -> np.ndarr
     frame, with all the limb carries, decays at `rate_i` (1/s: the rig's
     alpha, or exact_decay of it over a held step). Both hinge-coordinate
     engines (joint_space.py, reference/stepper.py) take C from here."""
+    if same_limb is True:  # (the reference keeps only one limb's entries: no copy)
+        return rate * mass
     return np.where(same_limb, rate * mass, 0.0)
 
 

@@ -144,10 +144,14 @@ class Chunk:
             self.log(f"{', '.join(self.trees[i].name for i in run.trees)}: the reference "
                      f"failed ({exc}); the pymunk tier takes over")
             for i in run.trees:
-                last = self.records[i].spans[-1]
+                record = self.records[i]
+                last = record.spans[-1]
                 why = f"{last.detail}; the reference failed" if last.detail else \
                     "the reference failed"
-                self.records[i].spans[-1] = replace(last, engine=Engine.PYMUNK, detail=why)
+                record.spans[-1] = replace(last, engine=Engine.PYMUNK, detail=why)
+                if run.starts is not None:  # its tier event names the engine that runs it
+                    record.switches[-1] = replace(record.switches[-1],
+                                                  detail=f"to {Engine.PYMUNK.value}: {why}")
             return [replace(run, engine=Engine.PYMUNK)]
         for i, m in zip(run.trees, tier.motions()):
             self.records[i].take(m, tier.first_frame, self.work_before.get(i, 0.0),
@@ -155,7 +159,8 @@ class Chunk:
         report = tier.report()
         report.timing.update(cpu_seconds=cpu, segment_frames=segment_frames)
         self.reports.append(report)
-        self.objects = tier.tracks() or self.objects
+        if run.starts is None:  # the run that throws the projectiles
+            self.objects = tier.tracks() or self.objects
         return self.follow(run, leaving)
 
     def advance(self, tier: Tier, run: Run) -> tuple[list[list[HandOff]], int]:
@@ -257,7 +262,7 @@ def pymunk_tier(trees: list[SimTree], scene: Scene, quality: Quality, loads: Sce
         note = (f"pymunk tier: trees a projectile can reach stepped at "
                 f"{quality.substep_rate:.0f} Hz with loads at {quality.force_rate:.0f} Hz (its "
                 "hits jolt the stems between coarser updates)")
-    tier = PymunkTier(trees, scene, quality, loads, log=log)
+    tier = PymunkTier(trees, scene, quality, loads, log=log, throws=starts is None)
     if note is not None:
         tier.stats.notes.append(note)
     if starts is None:

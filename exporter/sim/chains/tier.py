@@ -38,11 +38,14 @@ MAX_JOINT_GAP = 0.01  # a pivot opened further (fraction of bone length) stops t
 
 
 class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
-    """Simulate the active trees of one scene with the pymunk tier."""
+    """Simulate the active trees of one scene with the pymunk tier; with
+    `throws`, the scene's projectiles too (not for trees handed over from
+    the linear tier: no projectile can reach them)."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
-                 log=None):
+                 log=None, throws: bool = True):
         self.scene, self.quality, self.loads = scene, quality, loads
+        self.throws = throws
         self.log = log or (lambda msg: None)
         self.stats = Stats()
         fps = scene.fps
@@ -132,7 +135,8 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
                              self.radius, scene.ground, self.loads.g)
         self.ledger = Ledger(scene.frame_count, trees)
         self.load_work = LoadWork()
-        self.projectiles = Projectiles.from_scene(scene) if scene.projectiles else None
+        self.projectiles = Projectiles.from_scene(scene) if scene.projectiles and self.throws \
+            else None
         if start is not None:
             self._hand_over(start)
         self.read()

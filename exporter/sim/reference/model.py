@@ -146,12 +146,13 @@ class ReferenceModels:
 
     def _groups(self) -> None:
         """Which trees share a model (one per tree; trees a projectile can
-        reach share one with the projectiles), then build them all; spring
-        references from the gravity torques at rest (prestress)."""
+        reach share one with the projectiles, where this engine throws
+        them), then build them all; spring references from the gravity
+        torques at rest (prestress)."""
         scene = self.scene
         projectiles = bool(scene.projectiles)
         shared: list[int] = []
-        if projectiles:
+        if projectiles and self.throws:
             shared = [ti for ti, t in enumerate(self.trees)
                       if projectile_reaches(scene, t.rig.model)]
         self.groups: list[Group] = []
@@ -163,7 +164,7 @@ class ReferenceModels:
             ground = scene.ground and (self.touch_ground or falls
                                        or bool(self.breakable[bones].any()))
             self.groups.append(Group([ti], bones, False, ground))
-        if projectiles:
+        if projectiles and self.throws:
             bones = np.concatenate([np.arange(self.offsets[ti], self.offsets[ti + 1])
                                     for ti in shared] + [_ints()])
             self.groups.append(Group(shared, bones.astype(np.int64), True, scene.ground))

@@ -19,9 +19,6 @@ from ..solver import SolveResult, frame_timing
 from .stepper import MAX_SUBSTEPS, SPIN_PER_STEP, ReferenceEngine
 
 TWIG_HZ = 50.0  # a twig's ringing under a blast front (the blast note's example)
-# counts that add up over runs (the LOD's many hand-overs)
-COUNTS = ("steps", "updates", "bodies", "bones", "models", "rebuilds", "parts", "limited",
-          "broken", "clamped", "damping_scaled", "split", "blast_split")
 
 
 def engine_notes(engine: ReferenceEngine) -> list[str]:
@@ -66,8 +63,9 @@ def count_notes(stats: dict) -> list[str]:
 
 
 def report(engine: ReferenceEngine) -> TierReport:
-    """A run's counts (COUNTS, the first capped load, the joint that came
-    closest to breaking), its setting notes and timings (s)."""
+    """A run's counts (they add up over the LOD's runs), the first capped
+    load, the joint that came closest to breaking, its setting notes and
+    timings (s)."""
     st = engine.stats
     stats = {"steps": st.steps, "updates": st.updates, "models": len(engine.groups),
              "bodies": st.bodies, "bones": engine.n, "rebuilds": st.rebuilds,
@@ -99,7 +97,8 @@ class ReferenceTier:
         self.engine = ReferenceEngine(trees, scene, quality, loads, log=log,
                                       timestep=quality.reference_step,
                                       touch_ground=start is not None
-                                      and start.reason is Reason.GROUND)
+                                      and start.reason is Reason.GROUND,
+                                      throws=start is None)
         if start is None:
             self.engine.begin()
         else:
@@ -141,6 +140,7 @@ class ReferenceSolver:
         engine = self.engine
         engine.begin()
         frames = engine.scene.frame_count
+        engine.advance_to(0)  # the rest pose (a one-frame scene has no other)
         for f in range(1, frames):
             engine.advance_to(f)
             if progress is not None:

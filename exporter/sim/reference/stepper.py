@@ -81,14 +81,16 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
     to at most rules.BLAST_STEP while a blast pushes its trees and their
     twigs ring (BLAST_RING). `touch_ground`: the ground stops the trees
     even where nothing can fall (a tree handed over for its tips at the
-    ground). `quality` is only recorded: the rig's bones are already merged
-    by it."""
+    ground). `throws`: it simulates the scene's projectiles (not for a tree
+    handed over from the linear tier: no projectile can reach it). `quality`
+    is only recorded: the rig's bones are already merged by it."""
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  log=None, timestep: float | None = None, force_rate: float | None = None,
-                 touch_ground: bool = False):
+                 touch_ground: bool = False, throws: bool = True):
         self.scene, self.quality, self.loads = scene, quality, loads
         self.touch_ground = touch_ground  # the ground stops its trees even if nothing can fall
+        self.throws = throws  # it simulates the scene's projectiles
         self.log = log or (lambda msg: None)
         self.trees = [t for t in trees if t.active]
         target = timestep or DEFAULT_TIMESTEP
@@ -420,7 +422,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         that the linear tier handed over: its coordinates are exactly these
         hinges; frames before are left zero. With `hand_back` (the linear
         tier's step, s), the run stops at the first frame at which its trees
-        have stayed back in the linear range for linear.RETURN_WINDOW
+        have stayed back in the linear range for range.RETURN_WINDOW
         (`_back_in_range`), handing them back."""
         frames = self.scene.frame_count
         n = self.n
@@ -492,7 +494,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             return True
         for g in self.groups:
             mujoco.mj_step1(g.model, g.data)
-        self._t1 = time.perf_counter()
+        t1 = time.perf_counter()
         if self.update:
             self._read()
             self._check(t)
@@ -500,12 +502,14 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
                 self.samples.append((t, self.rot.copy(), self._pivots()))
             else:
                 self._frame(step // self.spf, t)
+        # s spent stepping and updating so far (the step may go on at the next call)
+        self._begun = (t1 - self._t0, time.perf_counter() - t1)
         return False
 
     def _frame(self, f: int, t: float) -> None:
         """Record frame f (at t s); stop at the last, or hand the trees back."""
         self._record(f)
-        if f > self.first_step // self.spf:
+        if f > self.first_frame:  # (the frame before a run's first is not its own)
             sub_frame_samples(self.quats[f - 1], self.quats[f], self.samples, self.offsets,
                               self.extra)
         self.samples = []
@@ -521,7 +525,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             q, v = self._hinges()
             self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL) for tr in self.trees)
             self.handed_back = [
-                HandOff(ti, t, 0, q[2 * lo:2 * hi], v[2 * lo:2 * hi], Reason.BACK,
+                HandOff(ti, t, -1, q[2 * lo:2 * hi], v[2 * lo:2 * hi], Reason.BACK,
                         BACK_DETAIL, frame=f, work=float(self.ledger.work[f, ti]))
                 for ti, (lo, hi) in enumerate(zip(self.offsets[:-1], self.offsets[1:]))]
 
@@ -530,6 +534,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         free parts' spin clamp, the splits and the loads; the damping; then
         mj_step2 (and the substeps of split models)."""
         step, t = self.step, self.step * self.h
+        resumed = time.perf_counter()
         if self.update:
             if self._events(t):
                 self._check(t)
@@ -553,9 +558,10 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
                 mujoco.mj_step2(g.model, g.data)
         self._substeps()
         t3 = time.perf_counter()
-        self.timing["update_seconds"] += t2 - self._t1
-        self.timing["step_seconds"] += (self._t1 - self._t0) + (t3 - t2)
-        self.step_times.append(t3 - self._t0)
+        stepped, updated = self._begun
+        self.timing["update_seconds"] += updated + (t2 - resumed)
+        self.timing["step_seconds"] += stepped + (t3 - t2)
+        self.step_times.append(stepped + updated + (t3 - resumed))
         self.stats.steps += 1
         self.step = step + 1
         self.pending = False
