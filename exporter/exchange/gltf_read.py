@@ -212,7 +212,7 @@ def _to_bake(doc: dict, blob: bytes, p: Path) -> Bake:
     if isinstance(info.get("reduction"), dict):
         meta["reduction"] = info["reduction"]
     bake = Bake(grid.times, trees, meta)
-    check_finite(bake, str(path))
+    check_finite(bake, str(p))
     return bake
 
 
