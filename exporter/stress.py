@@ -358,8 +358,10 @@ def report_markdown(results: list[Result]) -> str:
              f"{GAP_TOLERANCE:.0%} of bone length; after a cut, the centre of mass never "
              f"rises more than {RISE_TOLERANCE * 100:.0f} cm. The planar LOD runs at every "
              "quality level: its linear tier (implicit, unconditionally stable) and, for trees "
-             "that leave the linear range, its pymunk tier (rotary-inertia floor, loads "
-             "capped by impulse, steps split during impulsive loads; docs/physics.md)."), "",
+             "that leave the linear range, the MuJoCo reference at the level's step (the "
+             "pymunk tier with `--engine pymunk`: rotary-inertia floor, loads capped by "
+             "impulse, steps split during impulsive loads; docs/physics.md); joint gaps can "
+             "open on the pymunk tier only."), "",
              ("| case | solver | pass | energy growth | audit gain | max gap | COM rise m | "
              "broken | max spin rad/s | rest after s | wall s | what | adapted |"),
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
