@@ -1,6 +1,6 @@
 """The physics rules every engine applies, each written once: breaking,
 damping as an exact decay, free parts' inertia floor and spin clamp,
-felling's push, when a tree is at rest, and the load rates for hits.
+felling's push (fell_push), when a tree is at rest, and the load rates for hits.
 docs/physics.md has the reasons and the measurements behind the values."""
 
 from __future__ import annotations
@@ -12,6 +12,23 @@ import numpy as np
 from .events import BROKE, UPROOTED, Event
 
 FELL_NUDGE = 0.05  # rad/s: the feller's push at the cut, toward the felling direction
+FELL_MARGIN = 1.5  # the push's margin over the least that tips a stem over its hinge
+
+
+def fell_push(height: float, behind: float, gravity: float) -> float:
+    """The turn rate (rad/s) the feller gives a cut stem: FELL_NUDGE, or
+    more where its centre of mass, `height` m above the hinge and `behind`
+    m behind it (the stem's radius for an upright stem, its hinge being the
+    falling side's edge), must first be lifted over the hinge: what a
+    point mass needs (1/2 w^2 (h^2 + b^2) = g (|(h, b)| - h)) times
+    FELL_MARGIN, which covers a stem's larger moment of inertia (a
+    uniform pole's about its base is 4/3 of the point mass's at its
+    centre). `gravity` m/s^2."""
+    if behind <= 0.0 or height <= 0.0:
+        return FELL_NUDGE
+    reach = float(np.hypot(height, behind))
+    need = np.sqrt(2.0 * gravity * (reach - height)) / reach
+    return max(FELL_NUDGE, FELL_MARGIN * float(need))
 SETTLE_SPEED = 0.05  # m/s and rad/s: a fallen tree slower than this ...
 SETTLE_TIME = 0.5  # s: ... for this long is at rest
 STILL_SPEED = 0.005  # m/s and rad/s: the same for a standing tree no changing load reaches

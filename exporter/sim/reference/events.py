@@ -20,15 +20,15 @@ import numpy as np
 
 from ..events import AT_REST, CUT, HINGE, Event
 from ..rules import (
-    FELL_NUDGE,
     SETTLE_SPEED,
     SETTLE_TIME,
     Felling,
     break_event,
+    fell_push,
     past_strength,
     still_for,
 )
-from .model import Group
+from .model import GROUND_ONLY, Group
 
 LIMIT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
 
@@ -88,7 +88,8 @@ class ReferenceEvents:
     def _fell(self, ti: int, t: float, freed: dict[int, list[int]]) -> None:
         """Tree ti's felling at t s: at its cut the root joints' felling
         hinges lose spring and limit (the sideways hinge holds, like hinge
-        wood) and the tree is nudged over; past `hinge` degrees of lean the
+        wood), its felling hinge moves to the stem's edge on the falling
+        side and the tree is pushed over (rules.fell_push); past `hinge` degrees of lean the
         root joints go (added to `freed`, by group) and it falls free."""
         tree, state = self.trees[ti], self.cut_state[ti]
         if state is None or state is Felling.FALLING:
@@ -99,13 +100,29 @@ class ReferenceEvents:
         rows = np.searchsorted(g.bones, roots)
         if state is Felling.STANDING and t >= tree.cut.time:
             m, d = g.model, g.data
+            a = math.radians(tree.cut.direction)
+            toward = np.array([math.cos(a), math.sin(a), 0.0])
+            bones = np.arange(self.offsets[ti], self.offsets[ti + 1])
+            com = self.mass[bones] @ self.com0[bones] / self.mass[bones].sum()
             for r, b in zip(rows, roots):
                 j = g.hinge_jnt[r, 0]
+                # the hinge wood is the stem's edge on the side it falls
+                # toward: turning about its centre, the stem's base sinks
+                # up to a radius into the ground (a tilt of a few mrad here
+                # moves the stem by well under a millimetre)
+                self.hinge_pos[b] = self.base_radius[b] * toward
+                m.jnt_pos[j] = self.hinge_pos[b]
+                self.envelope_on[b] = True
+                for geom in (f"e{b}", f"d{b}"):
+                    if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, geom) >= 0:
+                        m.geom_contype[m.geom(geom).id] = GROUND_ONLY
+                lever = com - (self.pivot0[b] + self.hinge_pos[b])
+                push = fell_push(float(lever[2]), -float(lever @ toward), -float(self.loads.g[2]))
                 self.k[b, 0] = 0.0
                 self.cone[b, 0] = math.inf
                 m.jnt_stiffness[j] = 0.0
                 m.jnt_limited[j] = 0
-                d.qvel[g.hinge_dof[r, 0]] += FELL_NUDGE
+                d.qvel[g.hinge_dof[r, 0]] += push
                 self.breakable[b] = False
                 self.damped[b, 0] = False  # the hinge turns freely
             self._damping_pairs(g)

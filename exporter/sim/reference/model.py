@@ -6,10 +6,11 @@ One body per bone, nested as the rig's bones are, its frame at the bone's
 pivot with the world's orientation at rest (so its pose is the bake's);
 mass, COM and full inertia are the rig's. The joint at a bone's base is two
 hinges perpendicular to the bone (common.hinge_axes), each with the rig's
-stiffness and range +-cone. A capsule per bone collides with projectiles,
-and with the ground where the scene has one and something can fall (a
-cut, projectiles, breakable joints) or the tree came for its tips at the
-ground (docs/physics.md, "The reference")."""
+stiffness and range +-cone. A capsule per bone collides with projectiles;
+where the scene has a ground and something can fall (a cut, projectiles,
+breakable joints) or the tree came for its tips at the ground, a second
+capsule per bone around all its bark and leaf cards (its envelope) holds
+the mesh out of the ground (docs/physics.md, "The reference")."""
 
 from __future__ import annotations
 
@@ -29,6 +30,12 @@ PROJECTILE_TIMECONST = 0.005  # s, contact stiffness of projectiles (MuJoCo solr
 ROLLING = 0.01  # m, rolling friction (torque / normal force): soft ground stops rolling
 IN_GROUND = 4  # contype of a capsule in the ground at rest: projectiles hit it, the ground not
 BASE_SPHERE = 0.01  # m: the most radius of the sphere that holds a buried capsule's lower end up
+GROUND_ONLY = 8  # contype of a bone's envelope: the ground holds it up, projectiles pass it
+CLEARANCE = 0.001  # m: an envelope shortened off the ground at its pivot stops this far above it
+DISC = 0.005  # m, half the thickness of the disc that holds a stem's base ring out of the ground
+# s, the ground's contact time constant (MuJoCo solref) with the envelopes:
+# MuJoCo's default 0.02 s let a felled spruce's top sink 0.1 m as it landed
+GROUND_TIMECONST = 0.005
 XBODY = mujoco.mjtObj.mjOBJ_XBODY  # a body's frame (mjOBJ_BODY is its COM frame)
 
 
@@ -143,6 +150,55 @@ class ReferenceModels:
         half = (0.5 * ratio * self.length)[:, None] * self.axis0
         low = np.minimum((mid - half)[:, 2], (mid + half)[:, 2]) - self.radius
         self.in_ground = low < 0.0
+        # where each root's felling hinge turns, in its bone's frame (m): the
+        # stem's edge on the falling side once cut (_fell), else its pivot
+        self.hinge_pos = np.zeros((n, 3))
+        self._envelopes()
+
+    def _envelopes(self) -> None:
+        """Per bone, the capsule around its bark rings and leaf cards (the
+        mesh exchange/mesh.py draws): radius `reach` (m) about the line from
+        `reach_from` (m along the bone from its pivot) to its tip. Where it
+        would reach below the ground at the pivot at rest (a stem's base),
+        it starts a radius up the bone, so that it only touches the ground
+        once the bone has turned."""
+        self.reach = np.zeros(self.n)
+        self.base_radius = np.zeros(self.n)  # m, the bark's radius at the bone's pivot
+        for ti, t in enumerate(self.trees):
+            m, o = t.rig.model, int(self.offsets[ti])
+            p0, p1 = m.points[m.seg_start], m.points[m.seg_end]
+            length = np.linalg.norm(p1 - p0, axis=1)
+            # a ring inside a limb is at most the larger of its two segments'
+            parent = np.maximum(m.seg_parent, 0)
+            same = (m.seg_parent >= 0) & (m.seg_limb[parent] == m.seg_limb)
+            width = np.maximum(m.width, np.where(same, m.width[parent], 0.0))
+            half = 0.5 * np.where(m.leaf > 0, m.leaf_size, 0.0)
+            # a card's corner: half its edge across the segment, and along it
+            # beyond the segment's end where the card is longer than it
+            card = np.hypot(half, np.maximum(half - 0.5 * length, 0.0))
+            bone = t.rig.seg_bone + o
+            off = np.zeros(len(bone))
+            for end in (p0, p1):  # how far the segment's ends lie off the bone's line
+                v = end - self.pivot0[bone]
+                along = np.einsum("ij,ij->i", v, self.axis0[bone])
+                off = np.maximum(off, np.linalg.norm(v - along[:, None] * self.axis0[bone],
+                                                     axis=1))
+            np.maximum.at(self.reach, bone, off + np.maximum(0.5 * width, card))
+            first = np.full(t.rig.n_bones, len(bone))
+            np.minimum.at(first, t.rig.seg_bone, np.arange(len(bone)))
+            self.base_radius[o:o + t.rig.n_bones] = 0.5 * width[first]
+        self.reach = np.maximum(self.reach, self.radius)
+        low_pivot = self.pivot0[:, 2] <= self.tip0[:, 2]
+        start = np.where(low_pivot & (self.pivot0[:, 2] - self.reach < 0.0),
+                         self.reach + CLEARANCE, 0.0)
+        self.reach_from = np.where(start < self.length, start, 0.0)
+        # off: in the ground at the start; and a stem's base: standing, it
+        # turns about its centre (the root plate's give), where its rim must
+        # go into the ground; a cut moves that hinge to the rim (_fell) and
+        # turns the base's envelope on
+        self.envelope_on = ~((self.reach_from > 0) & (self.parent < 0))
+        # (the envelopes and the ground share it: MuJoCo mixes the two geoms')
+        self.solref = [max(GROUND_TIMECONST, 2 * self.h), 1.0]
 
     def _groups(self) -> None:
         """Which trees share a model (one per tree; trees a projectile can
@@ -198,15 +254,15 @@ class ReferenceModels:
         world = spec.worldbody
         if g.ground:
             world.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
-                           contype=2, conaffinity=1, condim=6,
-                           friction=[FRICTION, 0.005, ROLLING])
+                           contype=2, conaffinity=1 | GROUND_ONLY, condim=6,
+                           friction=[FRICTION, 0.005, ROLLING], solref=self.solref)
         bodies: dict[int, mujoco.MjsBody] = {}
         for b in g.bones.tolist():
             p = int(self.parent[b])
             held = self.attached[b] and p >= 0
             bodies[b] = self._add_bone(bodies[p] if held else world, b,
                                        self.pivot0[b] - (self.pivot0[p] if held else 0.0),
-                                       collide, g.ground and self.in_ground[b])
+                                       collide, g.ground, g.ground and self.in_ground[b])
         if g.projectiles:
             for i, pr in enumerate(self.scene.projectiles):
                 self._add_projectile(world, i, pr)
@@ -217,11 +273,13 @@ class ReferenceModels:
             self._transfer(g, sources)
         self.timing["compile_seconds"] += time.perf_counter() - t0
 
-    def _add_bone(self, parent, b: int, pos: np.ndarray, collide: bool, buried: bool):
+    def _add_bone(self, parent, b: int, pos: np.ndarray, collide: bool, ground: bool,
+                  buried: bool):
         """Bone b's body under `parent` at `pos` (m, in the parent's frame):
         its inertia, its joint (two hinges, or a free joint once broken
-        off), its capsule and, where the capsule is in the ground at rest
-        (`buried`), the small sphere that holds its lower end up."""
+        off), its capsule, with a `ground` its envelope (_envelopes) and,
+        where the capsule is in the ground at rest (`buried`), the small
+        sphere that holds its lower end up."""
         body = parent.add_body(name=f"b{b}", pos=pos)
         body.explicitinertial = True
         body.mass = float(self.mass[b])
@@ -234,6 +292,7 @@ class ReferenceModels:
                 limited = math.isfinite(self.cone[b, k])
                 body.add_joint(
                     name=f"j{b}_{k}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                    pos=self.hinge_pos[b] if k == 0 else np.zeros(3),
                     axis=self.hinge_axis[b, k], stiffness=float(self.k[b, k]),
                     springref=float(self.springref[b, k]),
                     limited=mujoco.mjtLimited.mjLIMITED_TRUE if limited
@@ -248,18 +307,66 @@ class ReferenceModels:
         # a capsule in the ground at rest never touches it (IN_GROUND: the
         # projectiles still do): freed (felled, uprooted) it would start deep
         # in it and be thrown out; the sphere holds that end up instead
-        body.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        # with an envelope the ground holds the envelope, not this capsule
+        body.add_geom(name=f"c{b}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
                       fromto=np.concatenate([lo * v, hi * v]),
                       size=[max(float(self.radius[b]), 1e-4), 0, 0],
-                      contype=(IN_GROUND if buried else 1) if collide else 0,
+                      contype=(IN_GROUND if buried or (ground and self.envelope_on[b]) else 1)
+                      if collide else 0,
                       conaffinity=0, condim=6, friction=[FRICTION, 0.005, ROLLING])
+        if ground:
+            a = v / max(float(self.length[b]), 1e-12)
+            body.add_geom(name=f"e{b}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                          fromto=np.concatenate([self.reach_from[b] * a, v]),
+                          size=[float(self.reach[b]), 0, 0],
+                          contype=GROUND_ONLY if self.envelope_on[b] else 0,
+                          conaffinity=0, condim=6, friction=[FRICTION, 0.005, ROLLING],
+                          solref=self.solref)
         if buried:
             rho = min(max(float(self.radius[b]), 1e-4), BASE_SPHERE)
             low = v if self.tip0[b, 2] < self.pivot0[b, 2] else np.zeros(3)
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[rho, 0, 0],
                           pos=low + np.array([0.0, 0.0, rho]), contype=1, conaffinity=0,
                           condim=6, friction=[FRICTION, 0.005, ROLLING])
+        if ground and self.reach_from[b] > 0:
+            # the envelope starts a radius up a stem's base: a disc on the
+            # base ring holds the ring's rim out of the ground once it turns
+            a = v / max(float(self.length[b]), 1e-12)
+            quat = np.zeros(4)
+            mujoco.mju_quatZ2Vec(quat, a)
+            body.add_geom(name=f"d{b}", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                          size=[float(self.base_radius[b]), DISC, 0], pos=DISC * a, quat=quat,
+                          contype=GROUND_ONLY if self.envelope_on[b] else 0, conaffinity=0,
+                          condim=6, friction=[FRICTION, 0.005, ROLLING], solref=self.solref)
         return body
+
+    def envelopes_off_in_ground(self) -> None:
+        """At the start (from rest or a hand-off), envelopes already in the
+        ground (a twig hanging to it, a tip the linear tier bent onto it)
+        would be thrown out: they stay off for the run, and their bones'
+        capsules take the ground as before."""
+        for g in self.groups:
+            if not g.ground:
+                continue
+            m, d = g.model, g.data
+            mujoco.mj_kinematics(m, d)
+            for b in g.bones.tolist():
+                e = m.geom(f"e{b}").id
+                axis = d.geom_xmat[e].reshape(3, 3)[:, 2]
+                ends = d.geom_xpos[e] + np.outer([-m.geom_size[e, 1], m.geom_size[e, 1]], axis)
+                low = ends[:, 2].min() - m.geom_size[e, 0]
+                disc = m.geom(f"d{b}").id if self.reach_from[b] > 0 else -1
+                if disc >= 0:  # its rim's lowest point
+                    az = abs(d.geom_xmat[disc].reshape(3, 3)[2, 2])
+                    low = min(low, d.geom_xpos[disc, 2] - DISC * az
+                              - m.geom_size[disc, 0] * math.sqrt(max(1.0 - az * az, 0.0)))
+                if low < -CLEARANCE:
+                    self.envelope_on[b] = False
+                    m.geom_contype[e] = 0
+                    if disc >= 0:
+                        m.geom_contype[disc] = 0
+                    if not self.in_ground[b]:
+                        m.geom_contype[m.geom(f"c{b}").id] = 1
 
     def _add_projectile(self, world, i: int, pr) -> None:
         """Projectile i (scene ProjectileSpec `pr`) as a free box or ball."""
