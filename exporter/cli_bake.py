@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .cli_progress import plural, progress_bar, stage_progress
+from .cli_tree import warn_grammar_files
 from .errors import InputError
 from .fileio import check_writable
 from .library import resolve
@@ -62,6 +63,7 @@ def cmd_bake(args) -> int:
     from .pipeline import bake_scene
 
     scene = load_job(args.job, args)
+    warn_grammar_files([t.grammar for t in scene.trees], args.strict)
     out = Path(args.out) / job_name(args.name or scene.name)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     progress = None if args.quiet else progress_bar("simulating")

@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 
 from .cli_progress import BatchDisplay, plural
-from .errors import InputError
+from .cli_tree import warn_grammar
+from .errors import InputError, TreebakeError
 from .fileio import write_text
 
 
@@ -27,6 +28,29 @@ def cmd_diff(args) -> int:
     return exit_code(report)
 
 
+def _warn_grammars(jobs, strict: bool) -> None:
+    """warn_grammar for every grammar file the jobs read, once per file. A
+    job whose scene or grammar does not load is passed over here: it fails
+    on its own, without stopping the batch."""
+    from .lsystem import load_grammar
+
+    seen: set[Path] = set()
+    for job in jobs:
+        try:
+            files = [p for p in job.inputs() if not job.scene or p != Path(job.scene)]
+        except (TreebakeError, OSError):
+            continue
+        for path in files:
+            if path in seen:
+                continue
+            seen.add(path)
+            try:
+                grammar = load_grammar(path)
+            except TreebakeError:
+                continue
+            warn_grammar(grammar, strict)
+
+
 def cmd_batch(args) -> int:
     import os
 
@@ -34,6 +58,7 @@ def cmd_batch(args) -> int:
     from .fileio import check_writable, check_writable_file
 
     jobs = load_jobs(args.jobs_file)
+    _warn_grammars(jobs, args.strict)
     workers = args.jobs or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")

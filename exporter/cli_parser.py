@@ -69,6 +69,9 @@ QUALITY = ("draft", "default", "final")
 OUT = opt("--out", default="out", help="output folder (default: out)")
 JOB_NAME = opt("--name", help="job name: the output subfolder (default: the bake's scene)")
 QUIET = opt("-q", "--quiet", action="store_true", help="no progress on stderr")
+STRICT = opt("--strict", action="store_true",
+             help="grammar warnings (a module whose parameter count no production takes, "
+                  "docs/grammar.md) are errors: exit 2 before any work")
 
 
 def json_option(what: str) -> Option:
@@ -84,6 +87,7 @@ GRAMMAR_OPTIONS = (
         help="derivation steps (default: grammar's)"),
     opt("--max-modules", type=int, default=None,
         help="cap on the derived string length (default 2,000,000)"),
+    STRICT,
 )
 
 EXPORT_OPTIONS = Group("export options", (
@@ -161,7 +165,8 @@ COMMANDS: tuple[Command, ...] = (
          json_option("print the summary as JSON"),
          opt("-q", "--quiet", action="store_true", help="no progress or notes on stderr"),
          opt("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, preview "
-                              "(default: the scene's `formats`, else only the .npz bake)")),
+                              "(default: the scene's `formats`, else only the .npz bake)"),
+         STRICT),
         defaults=EXPORT_DEFAULTS),
     Command(
         "export", cmd_export, "export a bake to glTF, OBJ sequences, USD, previews",
@@ -207,7 +212,7 @@ COMMANDS: tuple[Command, ...] = (
              help="Dask: fail the unfinished jobs after this long without any worker "
                   "(default 120)"),
          opt("--summary", help="summary JSON path (default: OUT/batch-summary.json)"),
-         json_option("print the summary as JSON"))),
+         json_option("print the summary as JSON"), STRICT)),
     Command(
         "sway", cmd_sway, "pull-and-release test: first sway frequency and damping",
         "Pull a tree's main stem at 0.6 of its height until the top moves 1 % of the height, "
@@ -217,7 +222,7 @@ COMMANDS: tuple[Command, ...] = (
          opt("--seed", type=int, default=None, help="random seed (default: grammar's)"),
          opt("--quality", choices=QUALITY, default="default",
              help="simulation quality level (default: default)"),
-         json_option("print the result as JSON"))),
+         json_option("print the result as JSON"), STRICT)),
     Command(
         "list", cmd_list, "the bundled grammars and scene presets",
         "List the species grammars and scene presets that ship with treebake, by the names "

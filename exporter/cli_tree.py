@@ -7,9 +7,30 @@ import json
 import sys
 from pathlib import Path
 
-from .errors import InputError, LimitError
+from .errors import GrammarError, InputError, LimitError
 from .fileio import check_writable, check_writable_file, write_text
 from .library import resolve
+
+
+def warn_grammar(grammar, strict: bool = False) -> None:
+    """Print the grammar's warnings to stderr (`treebake: warning: FILE:LINE:COL:
+    ...`); strict (--strict): the first is a GrammarError instead (exit 2)."""
+    for w in grammar.warnings:
+        if strict:
+            raise GrammarError(w.message, w.file, w.line, w.col)
+        print(f"treebake: warning: {w}", file=sys.stderr)
+
+
+def warn_grammar_files(paths, strict: bool = False) -> None:
+    """warn_grammar for each grammar file, once per file however many trees
+    share it. Parsing is cheap next to a run, so a scene's grammars are read
+    here once more, before any expensive work; a missing file is left to
+    the run, which names it in its own words."""
+    from .lsystem import load_grammar
+
+    for path in dict.fromkeys(Path(p) for p in paths):
+        if path.is_file():
+            warn_grammar(load_grammar(path), strict)
 
 
 def _derive(grammar, args):
@@ -41,6 +62,7 @@ def cmd_derive(args) -> int:
     if args.output:
         check_writable_file(args.output)
     grammar = load_grammar(resolve(args.grammar, ("grammar",)))
+    warn_grammar(grammar, args.strict)
     d = _derive(grammar, args)
     text = format_modules(d.modules)
     if args.output:
@@ -89,6 +111,7 @@ def cmd_inspect(args) -> int:
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     grammar = load_grammar(resolve(args.grammar, ("grammar",)))
+    warn_grammar(grammar, args.strict)
     out = check_writable(Path(args.out) / grammar.name)
     d = _derive(grammar, args)
     model = interpret(d.modules, grammar, seed=d.seed)
@@ -111,8 +134,9 @@ def cmd_inspect(args) -> int:
 def cmd_sway(args) -> int:
     from .sway import pull_release
 
-    r = pull_release(resolve(args.grammar, ("grammar",)), seed=args.seed,
-                     quality=args.quality)
+    path = resolve(args.grammar, ("grammar",))
+    warn_grammar_files([path], args.strict)
+    r = pull_release(path, seed=args.seed, quality=args.quality)
     data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
             "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
             "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),
