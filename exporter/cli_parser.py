@@ -128,8 +128,11 @@ COMMANDS: tuple[Command, ...] = (
     Command(
         "inspect", cmd_inspect, "tree statistics and a PNG preview",
         "Derive and interpret a grammar; print limb and segment counts, height, mass and "
-        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/.",
+        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/, <name> "
+        "being the grammar's file name, as for `treebake bake`.",
         (*GRAMMAR_OPTIONS, OUT,
+         opt("--name", help="the output subfolder (default: the grammar's file name: my.lsys "
+                            "-> OUT/my/)"),
          opt("--size", type=int, default=512, help="preview panel size, px, 64-2048 (default 512)"),
          json_option("print the summary as JSON"))),
     Command(

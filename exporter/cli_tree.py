@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from .cli_bake import job_name
 from .errors import InputError, LimitError
 from .fileio import check_writable, check_writable_file, write_text
 from .library import resolve
@@ -88,8 +89,11 @@ def cmd_inspect(args) -> int:
 
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
-    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
-    out = check_writable(Path(args.out) / grammar.name)
+    path = resolve(args.grammar, ("grammar",))
+    grammar = load_grammar(path)
+    # the folder `treebake bake` writes for this grammar: its file name, not
+    # the free-text `name:` inside it
+    out = check_writable(Path(args.out) / job_name(args.name or path.stem))
     d = _derive(grammar, args)
     model = interpret(d.modules, grammar, seed=d.seed)
     summary = inspect_summary(model, d)

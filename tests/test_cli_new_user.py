@@ -1,0 +1,35 @@
+"""The commands as a new user meets them (issue 42): every command run from
+an empty folder, with bundled files found by name. Self-contained (no
+conftest fixtures): the bundled files come from treebake.library."""
+
+from pathlib import Path
+
+from treebake import library
+from treebake.cli import main
+
+QUICK = ["--duration", "0.2", "--fps", "10", "--quality", "draft", "-q"]
+
+
+def _grammar_named(folder: Path, file: str, name: str) -> Path:
+    """The bundled sapling under another file name, its `name:` changed."""
+    text = library.grammar_path("sapling").read_text(encoding="utf-8")
+    path = folder / file
+    path.write_text(text.replace("name: sapling", f"name: {name}"), encoding="utf-8")
+    return path
+
+
+def test_inspect_and_bake_write_a_grammar_into_the_same_folder(tmp_path, monkeypatch, capsys):
+    # the folder is the grammar's file name for both, not its free-text `name:`
+    monkeypatch.chdir(tmp_path)
+    _grammar_named(tmp_path, "my.lsys", "My Sapling")
+    assert main(["inspect", "my.lsys", "--size", "64", "--json"]) == 0
+    assert main(["bake", "my.lsys", *QUICK]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["my"]
+    assert (tmp_path / "out" / "my" / "summary.json").is_file()
+    assert (tmp_path / "out" / "my" / "my.npz").is_file()
+    # a bundled grammar in a subfolder: its file name too, as `bake forest/birch` writes
+    assert main(["inspect", "forest/birch", "--size", "64", "--json"]) == 0
+    assert (tmp_path / "out" / "birch" / "preview.png").is_file()
+    assert main(["inspect", "my.lsys", "--size", "64", "--json", "--name", "other"]) == 0
+    assert (tmp_path / "out" / "other" / "summary.json").is_file()
+    capsys.readouterr()
