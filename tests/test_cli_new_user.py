@@ -33,3 +33,33 @@ def test_inspect_and_bake_write_a_grammar_into_the_same_folder(tmp_path, monkeyp
     assert main(["inspect", "my.lsys", "--size", "64", "--json", "--name", "other"]) == 0
     assert (tmp_path / "out" / "other" / "summary.json").is_file()
     capsys.readouterr()
+
+
+def test_a_copy_of_every_bundled_preset_loads_and_bakes(tmp_path, monkeypatch, capsys):
+    # the path `treebake list presets --json` gives, copied and edited in an
+    # empty folder: its grammars are bundled names, not paths into the package
+    import json
+
+    from treebake.scene import load_scene
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["list", "presets", "--json"]) == 0
+    entries = json.loads(capsys.readouterr().out)
+    assert len(entries) == len(library.presets()) >= 12
+    failed = {}
+    for e in entries:
+        copy = tmp_path / f"my-{e['name']}.toml"
+        copy.write_text(Path(e["path"]).read_text(encoding="utf-8"), encoding="utf-8")
+        try:
+            bundled, mine = load_scene(e["path"]), load_scene(copy)
+        except Exception as exc:  # noqa: BLE001 - list every preset that fails
+            failed[e["name"]] = str(exc)
+            continue
+        assert [(t.name, t.grammar.resolve(), t.position) for t in mine.trees] == \
+               [(t.name, t.grammar.resolve(), t.position) for t in bundled.trees]
+    assert not failed, failed
+    for name in ("forest", "tornado"):  # `grammars = [...]` of names, subfolder ones too
+        assert {t.grammar.parent.name for t in load_scene(f"my-{name}.toml").trees} == {"forest"}
+    assert main(["bake", "my-felling.toml", *QUICK]) == 0
+    assert (tmp_path / "out" / "felling" / "felling.npz").is_file()
+    capsys.readouterr()
