@@ -63,3 +63,38 @@ def test_a_copy_of_every_bundled_preset_loads_and_bakes(tmp_path, monkeypatch, c
     assert main(["bake", "my-felling.toml", *QUICK]) == 0
     assert (tmp_path / "out" / "felling" / "felling.npz").is_file()
     capsys.readouterr()
+
+
+def test_an_obj_sequence_prints_as_one_entry(tmp_path, monkeypatch, capsys):
+    # not one name per frame on one line: the sequence, its count and range
+    # (manifest.json still lists every file)
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["bake", "sapling", *QUICK, "--format", "glb,obj"]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("exported"))
+    assert "obj/sapling.####.obj (3 files, 0001-0003)" in line, line
+    assert "sapling.0002" not in line and "sapling.glb" in line and "manifest.json" in line
+    manifest = json.loads((tmp_path / "out" / "sapling" / "manifest.json").read_text())
+    assert "obj/sapling.0002.obj" in {f["path"] for f in manifest["files"]}
+    assert main(["export", "out/sapling/sapling.npz", "--format", "obj", "--name", "again",
+                 "-q"]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.endswith(": obj/again.####.obj (3 files, 0001-0003), obj/again.mtl, "
+                         "obj/textures/bark.png, obj/textures/leaf.png, manifest.json"), line
+
+
+def test_file_lists_collapse_numbered_sequences():
+    from treebake.cli_bake import file_list
+
+    obj = [f"obj/felling.{i:04d}.obj" for i in range(1, 290)]
+    assert file_list(["felling.glb", "felling.usd", *obj, "obj/felling.mtl", "manifest.json"]) \
+        == ("felling.glb, felling.usd, obj/felling.####.obj (289 files, 0001-0289), "
+            "obj/felling.mtl, manifest.json")
+    assert file_list(obj[::3]) == "obj/felling.####.obj (97 files, 0001-0289, step 3)"
+    assert file_list(["a.0001.obj", "a.0002.obj"]) == "a.0001.obj, a.0002.obj"  # too few
+    split = [f"f.birch_{i}.glb" for i in range(1, 12)]  # tree names: unpadded numbers
+    assert file_list(split) == "f.birch_*.glb (11 files, 1-11)"
+    many = file_list([f"f.{c}.glb" for c in "abcdefghijklmnopqrst"])
+    assert many.endswith("f.k.glb, ... 9 more (manifest.json lists every file)")
