@@ -220,7 +220,7 @@ COMMANDS: tuple[Command, ...] = (
          opt("--seed", type=int, default=None, help="random seed (default: grammar's)"),
          opt("--quality", choices=QUALITY, default="default",
              help="simulation quality level (default: default)"),
-         json_option("print the result as JSON"))),
+         json_option("print the result as JSON"), QUIET)),
     Command(
         "list", cmd_list, "the bundled grammars and scene presets",
         "List the species grammars and scene presets that ship with treebake, by the names "

@@ -113,10 +113,15 @@ def cmd_inspect(args) -> int:
 
 
 def cmd_sway(args) -> int:
+    from .cli_progress import progress_bar
     from .sway import pull_release
 
-    r = pull_release(resolve(args.grammar, ("grammar",)), seed=args.seed,
-                     quality=args.quality)
+    path = resolve(args.grammar, ("grammar",))
+    # as `treebake bake`: a bar on a terminal, else a plain line every few
+    # seconds and one at the end; notes on stderr; -q for neither
+    log = None if args.quiet else (lambda m: print(m, file=sys.stderr))
+    progress = None if args.quiet else progress_bar("simulating")
+    r = pull_release(path, seed=args.seed, quality=args.quality, log=log, progress=progress)
     data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
             "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
             "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),

@@ -98,3 +98,29 @@ def test_file_lists_collapse_numbered_sequences():
     assert file_list(split) == "f.birch_*.glb (11 files, 1-11)"
     many = file_list([f"f.{c}.glb" for c in "abcdefghijklmnopqrst"])
     assert many.endswith("f.k.glb, ... 9 more (manifest.json lists every file)")
+
+
+def test_sway_shows_progress_like_bake(tmp_path):
+    # without a terminal: plain lines (here every 0 s) and one at the end,
+    # as `treebake bake` prints them; -q: nothing on stderr
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "TREEBAKE_PROGRESS_SECONDS": "0"}
+    cmd = [sys.executable, "-m", "treebake.cli", "sway", "sapling", "--quality", "draft"]
+
+    def run(*extra):
+        return subprocess.run([*cmd, *extra], cwd=tmp_path, capture_output=True, text=True,
+                              env=env, timeout=300, check=False)
+
+    r = run()
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("sapling: H 3.0 m")
+    lines = r.stderr.splitlines()
+    assert lines and lines[-1].startswith("simulating: done in "), r.stderr
+    assert "\r" not in r.stderr  # no bar redraws in a log
+    assert "1 tree, 1 simulated" in r.stderr
+    quiet = run("-q")
+    assert quiet.returncode == 0 and quiet.stderr == "" and quiet.stdout == r.stdout
+    assert not os.listdir(tmp_path)  # writes nothing
