@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .cli_progress import plural, progress_bar, stage_progress
 from .errors import InputError
-from .fileio import check_writable
+from .fileio import output_folder
 from .library import resolve
 
 
@@ -229,10 +229,10 @@ def cmd_preview(args) -> int:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     bake = load_bake(path)
     name = job_name(args.name or str(bake.meta.get("scene") or path.stem))
-    folder = check_writable(Path(args.out) / name)
     stage = None if args.quiet else stage_progress()
     progress = None if stage is None else (lambda d, t: stage("preview", d, t))
-    files = write_previews(bake, folder, name, args.size, progress=progress)
+    with output_folder(Path(args.out) / name) as folder:
+        files = write_previews(bake, folder, name, args.size, progress=progress)
     if args.json:
         print(json.dumps({"files": [str(f) for f in files]}))
     else:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .cli_bake import job_name
 from .errors import InputError, LimitError
-from .fileio import check_writable, check_writable_file, write_text
+from .fileio import atomic_path, check_writable_file, output_folder, write_text
 from .library import resolve
 
 
@@ -93,16 +93,15 @@ def cmd_inspect(args) -> int:
     grammar = load_grammar(path)
     # the folder `treebake bake` writes for this grammar: its file name, not
     # the free-text `name:` inside it
-    out = check_writable(Path(args.out) / job_name(args.name or path.stem))
-    d = _derive(grammar, args)
-    model = interpret(d.modules, grammar, seed=d.seed)
-    summary = inspect_summary(model, d)
-    write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    image = model_preview(model, size=args.size)
-    from .fileio import atomic_path
-
-    with atomic_path(out / "preview.png") as tmp:
-        image.save(tmp, format="PNG")
+    # (removed again if it is new and the derivation fails: no empty folder)
+    with output_folder(Path(args.out) / job_name(args.name or path.stem)) as out:
+        d = _derive(grammar, args)
+        model = interpret(d.modules, grammar, seed=d.seed)
+        summary = inspect_summary(model, d)
+        write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        image = model_preview(model, size=args.size)
+        with atomic_path(out / "preview.png") as tmp:
+            image.save(tmp, format="PNG")
     if args.json:
         print(json.dumps(summary))
     else:

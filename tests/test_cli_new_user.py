@@ -124,3 +124,54 @@ def test_sway_shows_progress_like_bake(tmp_path):
     quiet = run("-q")
     assert quiet.returncode == 0 and quiet.stderr == "" and quiet.stdout == r.stdout
     assert not os.listdir(tmp_path)  # writes nothing
+
+
+def test_a_bake_leaves_no_lock_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["bake", "sapling", *QUICK, "--format", "glb"]) == 0
+    assert main(["export", "out/sapling/sapling.npz", "-q"]) == 0
+    assert not list(tmp_path.rglob(".treebake.lock"))
+    assert not list(tmp_path.rglob(".*.tmp"))
+
+
+def test_a_bake_that_fails_leaves_no_empty_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.lsys").write_text("name: bad\naxiom: F\nF -> F[+F\n")
+    (tmp_path / "scene.toml").write_text('name = "shot"\n[[tree]]\ngrammar = "bad.lsys"\n')
+    for args in (["bake", "bad.lsys", "-q"], ["bake", "scene.toml", "-q"],
+                 ["bake", "bad.lsys", "-q", "--out", "new/deeper"],
+                 ["inspect", "oak", "--max-modules", "10"]):
+        assert main(args) == 2, args  # the grammar does not parse; too many modules
+    capsys.readouterr()
+    assert not (tmp_path / "out").exists() and not (tmp_path / "new").exists()
+    (tmp_path / "out" / "mine").mkdir(parents=True)  # a folder that was there stays
+    assert main(["bake", "bad.lsys", "-q", "--name", "mine"]) == 2
+    assert (tmp_path / "out" / "mine").is_dir()
+
+
+def test_a_run_that_opened_the_lock_file_as_it_went_takes_a_new_one(tmp_path, monkeypatch):
+    # run A releases (and removes) the lock file just after run B opened it:
+    # B must not hold the removed file while a third run takes a new one
+    import pytest
+    from treebake import fileio
+    from treebake.errors import BusyError
+
+    folder = tmp_path / "job"
+    lock = folder / fileio.LOCK_NAME
+    a = fileio.job_lock(folder)
+    a.__enter__()
+    flock = fileio.fcntl.flock
+    opened = []
+
+    def a_finishes_first(fd, op):
+        if not opened:  # B has opened A's file and is about to lock it
+            opened.append(fd)
+            a.__exit__(None, None, None)
+        return flock(fd, op)
+
+    monkeypatch.setattr(fileio.fcntl, "flock", a_finishes_first)
+    with fileio.job_lock(folder):  # run B
+        assert opened and lock.exists()
+        with pytest.raises(BusyError), fileio.job_lock(folder):  # a third run
+            pass
+    assert not lock.exists() and folder.is_dir()
