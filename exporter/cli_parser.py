@@ -198,7 +198,7 @@ COMMANDS: tuple[Command, ...] = (
         "batch", cmd_batch, "run many bakes from a job file, in parallel, resumably",
         "Run the jobs of a job file (TOML, docs/batch.md) in worker processes or on a Dask "
         "cluster. Finished jobs whose inputs did not change are skipped. Exit 0 if every job "
-        "succeeded.",
+        "succeeded; 1 if one failed; 75 if another run was still writing one (rerun later).",
         (opt("jobs_file", help="job file (.toml)"), OUT,
          opt("--jobs", "-j", type=int, default=None,
              help="worker processes (default: the machine's cores)"),

@@ -175,3 +175,100 @@ def test_a_run_that_opened_the_lock_file_as_it_went_takes_a_new_one(tmp_path, mo
         with pytest.raises(BusyError), fileio.job_lock(folder):  # a third run
             pass
     assert not lock.exists() and folder.is_dir()
+
+
+def _jobs(tmp_path: Path, durations: dict[str, float]) -> Path:
+    """A job file of sapling bakes (npz only), one per name."""
+    grammar = library.grammar_path("sapling").as_posix()
+    text = '[defaults]\nformats = ["npz"]\nquality = "draft"\n'
+    for name, duration in durations.items():
+        text += f'\n[[job]]\nname = "{name}"\ngrammar = "{grammar}"\nduration = {duration}\n'
+    path = tmp_path / "jobs.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_batch_job_that_another_run_writes_is_busy_not_failed(tmp_path):
+    from treebake.batch import load_jobs, run_batch, run_job, summary
+    from treebake.fileio import job_lock
+
+    jobs = load_jobs(_jobs(tmp_path, {"a": 0.2, "b": 0.2}))
+    out = tmp_path / "out"
+    with job_lock(out / "a"):  # another run is writing job a, all through this one
+        results = run_batch(jobs, out, workers=1)
+    assert [(r.name, r.status) for r in results] == [("a", "busy"), ("b", "done")]
+    assert "another run" in results[0].message
+    data = summary(results, 1.0, 1)
+    assert (data["failed"], data["busy"], data["done"]) == (0, 1, 1)
+
+    # the other run finishes job a while this one still works: skipped, not failed
+    other = job_lock(out / "a")
+    other.__enter__()
+
+    def the_other_run_finishes(event, data):
+        if event == "end" and data.name == "a":
+            assert data.status == "busy"
+            other.__exit__(None, None, None)
+            assert run_job(jobs[0], str(out), force=True).status == "done"
+
+    results = run_batch(jobs, out, workers=1, force=True, report=the_other_run_finishes)
+    assert [(r.name, r.status, r.message) for r in results] == [
+        ("a", "skipped", "written by another run"), ("b", "done", "")]
+    assert "a.npz" in results[0].files
+
+
+def test_a_batch_job_that_another_run_left_unfinished_fails(tmp_path):
+    from treebake.batch import load_jobs, run_batch
+    from treebake.fileio import job_lock
+
+    jobs = load_jobs(_jobs(tmp_path, {"a": 0.2, "b": 0.2}))
+    out = tmp_path / "out"
+    other = job_lock(out / "a")
+    other.__enter__()
+
+    def the_other_run_stops(event, data):  # releases job a without writing it
+        if event == "end" and data.name == "a":
+            other.__exit__(None, None, None)
+
+    results = run_batch(jobs, out, workers=1, report=the_other_run_stops)
+    assert [r.status for r in results] == ["failed", "done"]
+    assert "another run was writing it and did not finish it" in results[0].message
+
+
+def test_two_batch_runs_of_one_job_file_at_once(tmp_path):
+    # run 2 starts while run 1 writes job a (long); it finds a busy, does b
+    # (short) and ends before run 1: busy is no failure (exit 75, "rerun
+    # later"); run 1 finds b written (skipped) and ends with a clean summary
+    import json
+    import os
+    import subprocess
+    import sys
+    import time
+
+    jobs = _jobs(tmp_path, {"a": 100.0, "b": 0.5})  # about 10 s and 0.1 s here
+    out = tmp_path / "out"
+
+    def batch(n):
+        return subprocess.Popen([sys.executable, "-m", "treebake.cli", "batch", str(jobs),
+                                 "-j", "1", "--out", str(out), "--summary",
+                                 str(tmp_path / f"summary-{n}.json")], cwd=tmp_path,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "TREEBAKE_PROGRESS_SECONDS": "60"})
+
+    first = batch(1)
+    deadline = time.time() + 120
+    while not (out / "a" / ".treebake.lock").exists():  # run 1 is writing job a
+        assert first.poll() is None and time.time() < deadline, first.communicate()
+        time.sleep(0.02)
+    second = batch(2)
+    out2, err2 = second.communicate(timeout=300)
+    _, err1 = first.communicate(timeout=300)
+    s1, s2 = (json.loads((tmp_path / f"summary-{n}.json").read_text()) for n in (1, 2))
+    status = [{r["name"]: r["status"] for r in s["results"]} for s in (s1, s2)]
+    assert status == [{"a": "done", "b": "skipped"}, {"a": "busy", "b": "done"}], (err1, err2)
+    assert (s1["failed"], s2["failed"], s2["busy"]) == (0, 0, 1)
+    assert first.returncode == 0, err1
+    assert second.returncode == 75, err2
+    assert "1 done, 0 skipped, 0 failed, 1 busy" in out2
+    assert "still being written by another run" in err2
+    assert all((out / n / "job.json").is_file() for n in "ab")
