@@ -9,9 +9,11 @@ import time
 from pathlib import Path
 
 from .cli_progress import BatchDisplay, plural
-from .cli_tree import warn_grammar
+from .cli_grammar import warn_grammar
 from .errors import InputError, TreebakeError
 from .fileio import write_text
+
+BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is finished yet
 
 
 def cmd_diff(args) -> int:
@@ -76,11 +78,19 @@ def cmd_batch(args) -> int:
     else:
         print(format_table(results))
         line = (f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed")
-        if data["interrupted"]:
-            line += f", {data['interrupted']} interrupted"
+        for extra in ("busy", "interrupted"):
+            if data[extra]:
+                line += f", {data[extra]} {extra}"
         print(f"{line} in {data['wall_seconds']:.1f} s with {plural(data['workers'], 'worker')}"
               f"; summary: {summary_path}")
     if data["interrupted"]:
         print("treebake: interrupted; rerun the same command to resume", file=sys.stderr)
         return 130
-    return 1 if data["failed"] else 0
+    if data["failed"]:
+        return 1
+    if data["busy"]:
+        print(f"treebake: {plural(data['busy'], 'job')} still being written by another run; "
+              "rerun the same command later to check them (finished jobs are skipped)",
+              file=sys.stderr)
+        return BUSY_EXIT
+    return 0

@@ -132,8 +132,11 @@ COMMANDS: tuple[Command, ...] = (
     Command(
         "inspect", cmd_inspect, "tree statistics and a PNG preview",
         "Derive and interpret a grammar; print limb and segment counts, height, mass and "
-        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/.",
+        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/, <name> "
+        "being the grammar's file name, as for `treebake bake`.",
         (*GRAMMAR_OPTIONS, OUT,
+         opt("--name", help="the output subfolder (default: the grammar's file name: my.lsys "
+                            "-> OUT/my/)"),
          opt("--size", type=int, default=512, help="preview panel size, px, 64-2048 (default 512)"),
          json_option("print the summary as JSON"))),
     Command(
@@ -200,7 +203,7 @@ COMMANDS: tuple[Command, ...] = (
         "batch", cmd_batch, "run many bakes from a job file, in parallel, resumably",
         "Run the jobs of a job file (TOML, docs/batch.md) in worker processes or on a Dask "
         "cluster. Finished jobs whose inputs did not change are skipped. Exit 0 if every job "
-        "succeeded.",
+        "succeeded; 1 if one failed; 75 if another run was still writing one (rerun later).",
         (opt("jobs_file", help="job file (.toml)"), OUT,
          opt("--jobs", "-j", type=int, default=None,
              help="worker processes (default: the machine's cores)"),
@@ -222,7 +225,7 @@ COMMANDS: tuple[Command, ...] = (
          opt("--seed", type=int, default=None, help="random seed (default: grammar's)"),
          opt("--quality", choices=QUALITY, default="default",
              help="simulation quality level (default: default)"),
-         json_option("print the result as JSON"), STRICT)),
+         json_option("print the result as JSON"), QUIET, STRICT)),
     Command(
         "list", cmd_list, "the bundled grammars and scene presets",
         "List the species grammars and scene presets that ship with treebake, by the names "

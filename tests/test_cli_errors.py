@@ -96,14 +96,14 @@ def test_plain_progress_lines_without_a_terminal(root, tmp_path):
     assert quiet.stderr == ""
 
 
-def test_summary_lines_in_order_naming_every_file(root, tmp_path):
+def test_summary_lines_in_order_naming_every_file_or_sequence(root, tmp_path):
     r = run("bake", root / SAPLING, *QUICK, "--out", tmp_path, "--format", "glb,obj")
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert lines[0].startswith("baked 1 tree (1 simulated, 57 segments), 7 frames in ")
     assert lines[0].endswith("sapling.npz")
     assert lines[1].startswith("exported ") and "sapling.glb" in lines[1]
-    assert "manifest.json" in lines[1] and "obj/sapling.0001.obj" in lines[1]
+    assert "manifest.json" in lines[1] and "obj/sapling.####.obj (7 files, 0001-0007)" in lines[1]
     manifest = json.loads((tmp_path / "sapling" / "manifest.json").read_text())
     assert f"exported {len(manifest['files']) + 1} files," in lines[1]
     assert lines[2].startswith("keyframes: ")
