@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..bake import Bake
+from ..bake import FAST_TURN_DEG, Bake
 from ..fileio import write_bytes
 from ..names import joint_names
 from .anim import Animation, ReduceOptions, animate, subtree_reach
@@ -307,12 +307,13 @@ class AnimationPart:
 def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: bool,
                      opts: ReduceOptions) -> AnimationPart | None:
     first: dict[int, int] = {}
-    parents, pos, rot, vec, reach, group = [], [], [], [], [], []
+    parents, pos, rot, vec, reach, group, allowed = [], [], [], [], [], [], []
     n = 0
     for g, i in enumerate(trees):
         t = bake.trees[i]
         first[i] = n
         _, p, q = t.samples(bake.times)
+        allowed.append(t.fast_samples(bake.times))  # sub-frame samples where a part turns fast
         parents.append(np.where(t.seg_parent >= 0, t.seg_parent + n, -1))
         pos.append(points_y_up(p))
         rot.append(quats_y_up(q))
@@ -333,11 +334,13 @@ def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: b
         vec.append(np.zeros((k, 3)))
         reach.append(np.asarray(o.sizes, np.float64))
         group.append(len(trees) + np.arange(k))
+        allowed.append(np.ones((len(times), k), bool))
     if not parents:
         return None
     anim = animate(np.concatenate(parents), np.concatenate(pos, axis=1),
                    np.concatenate(rot, axis=1), np.concatenate(vec), np.concatenate(reach),
-                   opts, np.concatenate(group), times=times)
+                   opts, np.concatenate(group), times=times,
+                   frames=np.searchsorted(times, bake.times), allowed=np.concatenate(allowed, 1))
     return AnimationPart(anim, times, first, obj_first)
 
 
@@ -346,7 +349,9 @@ def scene_animation(bake: Bake, trees: list[int], objects: bool,
     """Channels for the animated trees in `trees` (and the projectiles),
     reduced together (vectorised), each tree with its own error check.
     Trees on the frame grid share one part; a tree with extra sub-frame
-    samples gets a part of its own on its merged grid."""
+    samples gets a part of its own on its merged grid, where a joint keeps
+    them only inside the frame intervals where it turns fast
+    (TreeBake.fast_samples)."""
     moving = [i for i in trees if not bake.trees[i].static]
     plain = [i for i in moving if not len(bake.trees[i].extra_times)]
     parts = [_group_animation(bake, plain, np.asarray(bake.times, np.float64), objects, opts)]
@@ -460,6 +465,8 @@ def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
         result.animation["frames"] = len(bake.times)
         result.animation["extra_samples"] = sum(len(t.extra_times) for t in bake.trees
                                                 if not t.static)
+        result.animation["subframe_turn_deg"] = FAST_TURN_DEG
+        result.animation["errors_at"] = "frames"
     return result
 
 
@@ -467,8 +474,9 @@ def merge_reports(reports: list[dict]) -> dict:
     if not reports:
         return {}
     out = {k: sum(r[k] for r in reports) for k in ("nodes", "channels", "channels_written",
-                                                   "keys_full", "keys_written",
-                                                   "trees_reduced", "trees_unreduced")}
+                                                   "keys_full", "keys_written", "subframe_keys",
+                                                   "subframe_channels", "trees_reduced",
+                                                   "trees_unreduced")}
     out["frames"] = reports[0]["frames"]
     out["max_position_error_m"] = max(r["max_position_error_m"] for r in reports)
     out["max_angle_error_rad"] = max(r["max_angle_error_rad"] for r in reports)
