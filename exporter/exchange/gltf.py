@@ -15,6 +15,9 @@ only where it changes. Static trees are plain meshes with no joints and no
 animation. Key times: frame f at (frame_start + f) / fps s.
 `asset.extras.treebake` holds the frame grid (fps, frames, frame_start) and
 the keyframe reduction's world tolerances (`reduction`), for treebake diff.
+glTF has no scene frame range: the scene's `extras.treebake` holds it
+(frame_start, frame_end, fps) for a DCC to set (Blender makes it the
+scene's custom property `treebake`; docs/formats.md says what each needs).
 """
 
 from __future__ import annotations
@@ -219,8 +222,8 @@ class _Document:
         if self.extras:
             asset["extras"] = {"treebake": self.extras}
         scene = {"name": self.name, "nodes": self.roots}
-        if self.scene_extras:  # Blender makes these the scene's custom properties
-            scene["extras"] = self.scene_extras
+        if self.scene_extras:  # Blender makes them the scene's custom properties
+            scene["extras"] = {"treebake": self.scene_extras}
         doc = {"asset": asset, "scene": 0, "scenes": [scene],
                "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
         if self.textures:
@@ -371,6 +374,8 @@ def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objec
     (Blender, three.js's AnimationUtils) is the bake's frame number."""
     n = len(bake.times)
     fps = bake.fps
+    # the frame range, which glTF cannot say: frame_start..frame_end at fps
+    # key every frame of the bake (keys at frame / fps s)
     hint = {"frame_start": frame_start, "frame_end": frame_start + n - 1, "fps": fps}
     # the frame grid, so a reader (treebake diff) can sample reduced channels,
     # and the reduction's world tolerances: how far the file may be from its bake
