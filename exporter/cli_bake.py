@@ -9,8 +9,8 @@ import re
 import sys
 from pathlib import Path
 
-from .cli_progress import plural, progress_bar, stage_progress
 from .cli_grammar import warn_grammar_files
+from .cli_progress import plural, progress_bar, stage_progress
 from .errors import InputError
 from .fileio import output_folder
 from .library import resolve

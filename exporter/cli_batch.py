@@ -8,8 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from .cli_progress import BatchDisplay, plural
 from .cli_grammar import warn_grammar
+from .cli_progress import BatchDisplay, plural
 from .errors import InputError, TreebakeError
 from .fileio import write_text
 
