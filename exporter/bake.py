@@ -12,8 +12,10 @@ Fast motion: a tree may also carry extra sub-frame samples (`extra_times`,
 s, strictly between frame times, sorted; `extra_positions`,
 `extra_rotations` with the same meaning as `positions`, `rotations`) where
 its segments turn fast (more than 45 degrees between frames). glTF and USD
-merge them into the animation keys; OBJ sequences, previews and `diff` use
-the frames alone. Empty (K = 0) by default.
+merge them into the animation keys, but only inside a frame interval where
+the part turns more than FAST_TURN_DEG (`TreeBake.fast_samples`): the
+simulation records them for the whole tree; OBJ sequences, previews and
+`diff` use the frames alone. Empty (K = 0) by default.
 
 Saved as `.npz` written with fixed zip timestamps, so the same bake gives
 the same bytes.
@@ -32,11 +34,14 @@ import numpy as np
 
 from .errors import InputError
 from .fileio import atomic_path
-from .rotations import qrotate
+from .rotations import angle_between, qrotate
 from .versions import runtime_versions
 
 FORMAT_VERSION = 1
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
+# degrees: a segment turning more than this between two frames is fast there;
+# the simulation records sub-frame samples for it, the exporters keep them
+FAST_TURN_DEG = 45.0
 
 
 @dataclass
@@ -84,6 +89,29 @@ class TreeBake:
         order = np.argsort(times, kind="stable")
         return (times[order], np.concatenate([self.positions, self.extra_positions])[order],
                 np.concatenate([self.rotations, self.extra_rotations])[order])
+
+    def fast_samples(self, frame_times: np.ndarray,
+                     turn_deg: float = FAST_TURN_DEG) -> np.ndarray:
+        """(N, S) bool over `samples(frame_times)`: True at every frame, and
+        at a sub-frame sample for the segments that turn more than
+        `turn_deg` between the two frames around it (the angle summed over
+        the samples from one frame to the next, so a turn that comes back
+        counts too)."""
+        times, _, rot = self.samples(frame_times)
+        fr = np.searchsorted(times, times[:1] if self.static else frame_times)
+        keep = np.zeros((len(times), self.n_segments), bool)
+        keep[fr] = True
+        if len(times) == len(fr):
+            return keep
+        q = rot.astype(np.float64)
+        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        step = angle_between(q[:-1], q[1:])  # (N-1, S) rad
+        walked = np.concatenate([np.zeros((1, self.n_segments)), np.cumsum(step, axis=0)])
+        turn = walked[fr[1:]] - walked[fr[:-1]]  # (F-1, S) per frame interval
+        sub = np.flatnonzero(~keep[:, 0])
+        interval = np.searchsorted(fr, sub) - 1  # the frame before each sub-frame sample
+        keep[sub] = turn[interval] > np.radians(turn_deg)
+        return keep
 
     def check_extras(self, frame_times: np.ndarray) -> None:
         """Raise InputError unless the extra samples fit the contract above."""

@@ -37,14 +37,15 @@ from .batch_dask import DASK_WORKER_TIMEOUT, run_dask
 from .batch_jobs import Job, JobResult, load_jobs, scene_of
 from .batch_pool import MAX_ATTEMPTS, StopSignals, run_processes, run_serial
 from .batch_summary import format_table, summary
-from .errors import TreebakeError
+from .errors import BusyError, TreebakeError
 from .fileio import job_lock, write_text
 from .fingerprint import ResumeFingerprint, code_fingerprint
 from .versions import NOT_INSTALLED, UNKNOWN, VersionChange, runtime_versions, version_changes
 
 __all__ = ["DASK_WORKER_TIMEOUT", "MAX_ATTEMPTS", "Job", "JobResult", "code_fingerprint",
            "file_record", "finished", "format_table", "load_jobs", "resume_fingerprint",
-           "run_batch", "run_job", "runtime_versions", "scene_of", "stale_reason", "summary"]
+           "run_batch", "run_job", "runtime_versions", "scene_of", "settle_busy", "stale_reason",
+           "summary"]
 
 
 # ---------------------------------------------------------------------------
@@ -147,6 +148,8 @@ def finished(job: Job, out: Path) -> bool:
 # ---------------------------------------------------------------------------
 # running one job
 
+BUSY = "another run holds its folder and is writing it"
+
 
 def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult:
     """Bake and export one job into `out/<name>/`; never raises."""
@@ -188,6 +191,8 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             return JobResult(job.name, "done", time.perf_counter() - start, redone,
                              [r["path"] for r in records], len(bake.times),
                              sum(t.n_segments for t in bake.trees))
+    except BusyError:  # another run writes this job now: its outcome is that run's to report
+        return JobResult(job.name, "busy", time.perf_counter() - start, BUSY)
     except TreebakeError as exc:
         return JobResult(job.name, "failed", time.perf_counter() - start, str(exc))
     except Exception as exc:  # noqa: BLE001 - a job reports any failure, never stops the batch
@@ -226,4 +231,52 @@ def run_batch(jobs: list[Job], out: str | Path, workers: int | None = None, forc
             report("workers", min(workers, len(jobs)))
             results = run_processes(jobs, out, force, workers, report, stop, run_job)
     why = f"not started: stopped by {stop.name}" if stop.name else "not started"
-    return [results.get(j.name) or JobResult(j.name, "interrupted", message=why) for j in jobs]
+    out_results = [results.get(j.name) or JobResult(j.name, "interrupted", message=why)
+                   for j in jobs]
+    if executor == "dask" or stop.name:  # (the resume check belongs on the workers there)
+        return out_results
+    return settle_busy(jobs, out_results, out)
+
+
+def settle_busy(jobs: list[Job], results: list[JobResult], out: str | Path) -> list[JobResult]:
+    """The "busy" jobs (another run held them) looked at again once this
+    run's own jobs are done, without waiting: still held -> "busy"; free
+    and finished (the resume check) -> "skipped", "written by another
+    run"; free and not finished -> "failed" (the other run failed it or was
+    stopped: rerun to redo it). So of two runs of one job file, the later
+    to finish (whose batch-summary.json stays) tells the whole outcome."""
+    by_name = {j.name: j for j in jobs}
+    root = Path(out)
+    settled = []
+    for r in results:
+        job = by_name.get(r.name)
+        if r.status != "busy" or job is None:
+            settled.append(r)
+            continue
+        reason = "its folder is gone"
+        if (root / job.name).is_dir():
+            try:
+                with job_lock(root / job.name):
+                    reason = stale_reason(job, root)
+            except BusyError:
+                settled.append(r)
+                continue
+            except (OSError, TreebakeError) as exc:
+                reason = str(exc)
+        if reason is None:
+            settled.append(_written_elsewhere(r, root / job.name))
+        else:
+            settled.append(JobResult(r.name, "failed", r.seconds,
+                                     f"another run was writing it and did not finish it "
+                                     f"({reason}); rerun to redo it"))
+    return settled
+
+
+def _written_elsewhere(r: JobResult, folder: Path) -> JobResult:
+    """A busy job that the other run finished: its files from job.json."""
+    try:
+        record = json.loads((folder / "job.json").read_text())
+        files = [str(f["path"]) for f in record["files"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        files = []
+    return JobResult(r.name, "skipped", r.seconds, "written by another run", files)

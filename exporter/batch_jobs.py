@@ -216,7 +216,9 @@ class JobResult:
     job folder."""
 
     name: str
-    status: str  # "done", "skipped", "failed", "interrupted" (stopped by SIGINT/SIGTERM)
+    # "done", "skipped" (up to date, or written by another run), "failed", "busy" (another
+    # run was writing it at the end of this one), "interrupted" (stopped by SIGINT/SIGTERM)
+    status: str
     seconds: float = 0.0
     message: str = ""
     files: list[str] = field(default_factory=list)

@@ -18,6 +18,7 @@ def summary(results: list[JobResult], wall: float, workers: int) -> dict:
         "done": sum(r.status == "done" for r in results),
         "skipped": sum(r.status == "skipped" for r in results),
         "failed": sum(r.status == "failed" for r in results),
+        "busy": sum(r.status == "busy" for r in results),
         "interrupted": sum(r.status == "interrupted" for r in results),
         "results": [{**asdict(r), "seconds": round(r.seconds, 3)} for r in results],
     }

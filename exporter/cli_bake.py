@@ -3,13 +3,16 @@ a bake to files."""
 
 from __future__ import annotations
 
+import itertools
 import json
+import re
 import sys
 from pathlib import Path
 
+from .cli_grammar import warn_grammar_files
 from .cli_progress import plural, progress_bar, stage_progress
 from .errors import InputError
-from .fileio import check_writable
+from .fileio import output_folder
 from .library import resolve
 
 
@@ -62,6 +65,7 @@ def cmd_bake(args) -> int:
     from .pipeline import bake_scene
 
     scene = load_job(args.job, args)
+    warn_grammar_files([t.grammar for t in scene.trees], args.strict)
     out = Path(args.out) / job_name(args.name or scene.name)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     progress = None if args.quiet else progress_bar("simulating")
@@ -147,13 +151,47 @@ def export_summary(report) -> dict:
             "sizes": m["sizes"]}
 
 
+_NUMBERED = re.compile(r"(?P<head>.*?)(?P<number>\d+)(?P<tail>\D*)\Z")  # the last number
+
+
+def file_list(names: list[str], most: int = 12, run: int = 3) -> str:
+    """`names` for one line: each numbered sequence of `run` or more files
+    (the same text around the last number) as one entry,
+    `obj/felling.####.obj (289 files, 0001-0289)` (`*` for unpadded
+    numbers of several widths; `step N` when every N-th), the rest by name,
+    in first-seen order; past `most` entries, how many more."""
+    groups: dict[tuple, list[str]] = {}
+    for name in names:
+        m = _NUMBERED.match(name)
+        key = (m["head"], m["tail"]) if m else (name, None)
+        groups.setdefault(key, []).append(name)
+    entries = []
+    for (head, tail), members in groups.items():
+        if tail is None or len(members) < run:
+            entries += members
+            continue
+        digits = [_NUMBERED.match(n)["number"] for n in members]
+        widths = {len(d) for d in digits}
+        mark = "#" * widths.pop() if len(widths) == 1 else "*"
+        numbers = sorted(int(d) for d in digits)
+        steps = {b - a for a, b in itertools.pairwise(numbers)}
+        step = f", step {min(steps)}" if len(steps) == 1 and min(steps) > 1 else ""
+        entries.append(f"{head}{mark}{tail} ({len(members)} files, "
+                       f"{min(digits, key=int)}-{max(digits, key=int)}{step})")
+    if len(entries) > most:
+        more = len(entries) - most + 1
+        entries = [*entries[:most - 1], f"... {more} more (manifest.json lists every file)"]
+    return ", ".join(entries)
+
+
 def print_export(report) -> None:
-    """An export's files and keyframe reduction, as text on stdout."""
+    """An export's files (numbered sequences as one entry each; manifest.json
+    lists every file) and keyframe reduction, as text on stdout."""
     m = report.manifest
     a = m.get("animation")
     names = [e["path"] for e in m["files"]] + ["manifest.json"]
     print(f"exported {plural(len(names), 'file')}, {m['total_bytes'] / 1e6:.1f} MB -> "
-          f"{report.folder}: {', '.join(names)}")
+          f"{report.folder}: {file_list(names)}")
     if a and a.get("keys_full"):
         print(f"keyframes: {a['keys_written']:,} of {a['keys_full']:,} written "
               f"({100 * a['keys_kept_fraction']:.1f} %), {a['channels_written']:,} of "
@@ -193,12 +231,12 @@ def cmd_preview(args) -> int:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     bake = load_bake(path)
     name = job_name(args.name or str(bake.meta.get("scene") or path.stem))
-    folder = check_writable(Path(args.out) / name)
     stage = None if args.quiet else stage_progress()
     progress = None if stage is None else (lambda d, t: stage("preview", d, t))
-    files = write_previews(bake, folder, name, args.size, progress=progress)
+    with output_folder(Path(args.out) / name) as folder:
+        files = write_previews(bake, folder, name, args.size, progress=progress)
     if args.json:
         print(json.dumps({"files": [str(f) for f in files]}))
     else:
-        print("written: " + ", ".join(str(f) for f in files))
+        print("written: " + file_list([str(f) for f in files]))
     return 0

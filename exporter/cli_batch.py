@@ -8,9 +8,12 @@ import sys
 import time
 from pathlib import Path
 
+from .cli_grammar import warn_grammar
 from .cli_progress import BatchDisplay, plural
-from .errors import InputError
+from .errors import InputError, TreebakeError
 from .fileio import write_text
+
+BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is finished yet
 
 
 def cmd_diff(args) -> int:
@@ -27,6 +30,29 @@ def cmd_diff(args) -> int:
     return exit_code(report)
 
 
+def _warn_grammars(jobs, strict: bool) -> None:
+    """warn_grammar for every grammar file the jobs read, once per file. A
+    job whose scene or grammar does not load is passed over here: it fails
+    on its own, without stopping the batch."""
+    from .lsystem import load_grammar
+
+    seen: set[Path] = set()
+    for job in jobs:
+        try:
+            files = [p for p in job.inputs() if not job.scene or p != Path(job.scene)]
+        except (TreebakeError, OSError):
+            continue
+        for path in files:
+            if path in seen:
+                continue
+            seen.add(path)
+            try:
+                grammar = load_grammar(path)
+            except TreebakeError:
+                continue
+            warn_grammar(grammar, strict)
+
+
 def cmd_batch(args) -> int:
     import os
 
@@ -34,6 +60,7 @@ def cmd_batch(args) -> int:
     from .fileio import check_writable, check_writable_file
 
     jobs = load_jobs(args.jobs_file)
+    _warn_grammars(jobs, args.strict)
     workers = args.jobs or os.cpu_count() or 1
     if workers < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
@@ -51,11 +78,19 @@ def cmd_batch(args) -> int:
     else:
         print(format_table(results))
         line = (f"{data['done']} done, {data['skipped']} skipped, {data['failed']} failed")
-        if data["interrupted"]:
-            line += f", {data['interrupted']} interrupted"
+        for extra in ("busy", "interrupted"):
+            if data[extra]:
+                line += f", {data[extra]} {extra}"
         print(f"{line} in {data['wall_seconds']:.1f} s with {plural(data['workers'], 'worker')}"
               f"; summary: {summary_path}")
     if data["interrupted"]:
         print("treebake: interrupted; rerun the same command to resume", file=sys.stderr)
         return 130
-    return 1 if data["failed"] else 0
+    if data["failed"]:
+        return 1
+    if data["busy"]:
+        print(f"treebake: {plural(data['busy'], 'job')} still being written by another run; "
+              "rerun the same command later to check them (finished jobs are skipped)",
+              file=sys.stderr)
+        return BUSY_EXIT
+    return 0

@@ -69,6 +69,9 @@ QUALITY = ("draft", "default", "final")
 OUT = opt("--out", default="out", help="output folder (default: out)")
 JOB_NAME = opt("--name", help="job name: the output subfolder (default: the bake's scene)")
 QUIET = opt("-q", "--quiet", action="store_true", help="no progress on stderr")
+STRICT = opt("--strict", action="store_true",
+             help="grammar warnings (a module whose parameter count no production takes, "
+                  "docs/grammar.md) are errors: exit 2 before any work")
 
 
 def json_option(what: str) -> Option:
@@ -84,6 +87,7 @@ GRAMMAR_OPTIONS = (
         help="derivation steps (default: grammar's)"),
     opt("--max-modules", type=int, default=None,
         help="cap on the derived string length (default 2,000,000)"),
+    STRICT,
 )
 
 EXPORT_OPTIONS = Group("export options", (
@@ -128,8 +132,11 @@ COMMANDS: tuple[Command, ...] = (
     Command(
         "inspect", cmd_inspect, "tree statistics and a PNG preview",
         "Derive and interpret a grammar; print limb and segment counts, height, mass and "
-        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/.",
+        "bounds; write summary.json and preview.png (front and side) into OUT/<name>/, <name> "
+        "being the grammar's file name, as for `treebake bake`.",
         (*GRAMMAR_OPTIONS, OUT,
+         opt("--name", help="the output subfolder (default: the grammar's file name: my.lsys "
+                            "-> OUT/my/)"),
          opt("--size", type=int, default=512, help="preview panel size, px, 64-2048 (default 512)"),
          json_option("print the summary as JSON"))),
     Command(
@@ -161,7 +168,8 @@ COMMANDS: tuple[Command, ...] = (
          json_option("print the summary as JSON"),
          opt("-q", "--quiet", action="store_true", help="no progress or notes on stderr"),
          opt("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, preview "
-                              "(default: the scene's `formats`, else only the .npz bake)")),
+                              "(default: the scene's `formats`, else only the .npz bake)"),
+         STRICT),
         defaults=EXPORT_DEFAULTS),
     Command(
         "export", cmd_export, "export a bake to glTF, OBJ sequences, USD, previews",
@@ -195,7 +203,7 @@ COMMANDS: tuple[Command, ...] = (
         "batch", cmd_batch, "run many bakes from a job file, in parallel, resumably",
         "Run the jobs of a job file (TOML, docs/batch.md) in worker processes or on a Dask "
         "cluster. Finished jobs whose inputs did not change are skipped. Exit 0 if every job "
-        "succeeded.",
+        "succeeded; 1 if one failed; 75 if another run was still writing one (rerun later).",
         (opt("jobs_file", help="job file (.toml)"), OUT,
          opt("--jobs", "-j", type=int, default=None,
              help="worker processes (default: the machine's cores)"),
@@ -207,7 +215,7 @@ COMMANDS: tuple[Command, ...] = (
              help="Dask: fail the unfinished jobs after this long without any worker "
                   "(default 120)"),
          opt("--summary", help="summary JSON path (default: OUT/batch-summary.json)"),
-         json_option("print the summary as JSON"))),
+         json_option("print the summary as JSON"), STRICT)),
     Command(
         "sway", cmd_sway, "pull-and-release test: first sway frequency and damping",
         "Pull a tree's main stem at 0.6 of its height until the top moves 1 % of the height, "
@@ -217,7 +225,7 @@ COMMANDS: tuple[Command, ...] = (
          opt("--seed", type=int, default=None, help="random seed (default: grammar's)"),
          opt("--quality", choices=QUALITY, default="default",
              help="simulation quality level (default: default)"),
-         json_option("print the result as JSON"))),
+         json_option("print the result as JSON"), QUIET, STRICT)),
     Command(
         "list", cmd_list, "the bundled grammars and scene presets",
         "List the species grammars and scene presets that ship with treebake, by the names "

@@ -7,8 +7,10 @@ import json
 import sys
 from pathlib import Path
 
+from .cli_bake import job_name
+from .cli_grammar import warn_grammar, warn_grammar_files
 from .errors import InputError, LimitError
-from .fileio import check_writable, check_writable_file, write_text
+from .fileio import atomic_path, check_writable_file, output_folder, write_text
 from .library import resolve
 
 
@@ -41,6 +43,7 @@ def cmd_derive(args) -> int:
     if args.output:
         check_writable_file(args.output)
     grammar = load_grammar(resolve(args.grammar, ("grammar",)))
+    warn_grammar(grammar, args.strict)
     d = _derive(grammar, args)
     text = format_modules(d.modules)
     if args.output:
@@ -88,17 +91,20 @@ def cmd_inspect(args) -> int:
 
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
-    grammar = load_grammar(resolve(args.grammar, ("grammar",)))
-    out = check_writable(Path(args.out) / grammar.name)
-    d = _derive(grammar, args)
-    model = interpret(d.modules, grammar, seed=d.seed)
-    summary = inspect_summary(model, d)
-    write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    image = model_preview(model, size=args.size)
-    from .fileio import atomic_path
-
-    with atomic_path(out / "preview.png") as tmp:
-        image.save(tmp, format="PNG")
+    path = resolve(args.grammar, ("grammar",))
+    grammar = load_grammar(path)
+    warn_grammar(grammar, args.strict)
+    # the folder `treebake bake` writes for this grammar: its file name, not
+    # the free-text `name:` inside it
+    # (removed again if it is new and the derivation fails: no empty folder)
+    with output_folder(Path(args.out) / job_name(args.name or path.stem)) as out:
+        d = _derive(grammar, args)
+        model = interpret(d.modules, grammar, seed=d.seed)
+        summary = inspect_summary(model, d)
+        write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+        image = model_preview(model, size=args.size)
+        with atomic_path(out / "preview.png") as tmp:
+            image.save(tmp, format="PNG")
     if args.json:
         print(json.dumps(summary))
     else:
@@ -109,10 +115,16 @@ def cmd_inspect(args) -> int:
 
 
 def cmd_sway(args) -> int:
+    from .cli_progress import progress_bar
     from .sway import pull_release
 
-    r = pull_release(resolve(args.grammar, ("grammar",)), seed=args.seed,
-                     quality=args.quality)
+    path = resolve(args.grammar, ("grammar",))
+    warn_grammar_files([path], args.strict)
+    # as `treebake bake`: a bar on a terminal, else a plain line every few
+    # seconds and one at the end; notes on stderr; -q for neither
+    log = None if args.quiet else (lambda m: print(m, file=sys.stderr))
+    progress = None if args.quiet else progress_bar("simulating")
+    r = pull_release(path, seed=args.seed, quality=args.quality, log=log, progress=progress)
     data = {"grammar": args.grammar, "height_m": round(r.height, 3), "dbh_m": round(r.dbh, 4),
             "frequency_hz": round(r.frequency, 4), "damping_ratio": round(r.damping, 4),
             "rayleigh_frequency_hz": round(r.rayleigh_frequency, 4), "pull_n": round(r.force, 1),

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__
-from .bake import Bake, check_finite
+from .bake import FAST_TURN_DEG, Bake, check_finite
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
@@ -294,6 +294,8 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
                                     "\n  ".join(res.validation_errors[:20]))
             files += res.files
             manifest["usd"] = {"time_codes": list(res.time_codes), "joints": res.joints,
+                               "subframe_codes": res.subframe_codes,
+                               "subframe_turn_deg": FAST_TURN_DEG,
                                "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0}
     return files
 

@@ -58,22 +58,65 @@ def write_text(path: str | Path, text: str) -> Path:
     return write_bytes(path, text.encode("utf-8"))
 
 
+def _make_writable(p: Path) -> None:
+    """mkdir -p, then write and delete a probe file; OSError as it comes."""
+    if p.exists() and not p.is_dir():
+        raise NotADirectoryError(20, "it is a file, not a folder")
+    p.mkdir(parents=True, exist_ok=True)
+    fd, probe = tempfile.mkstemp(prefix=".treebake-probe.", suffix=".tmp", dir=p)
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _cannot_write(p: Path, exc: OSError) -> OutputError:
+    return OutputError(f"cannot write to output folder {p}: {exc.strerror or exc}")
+
+
 def check_writable(folder: str | Path) -> Path:
     """Create `folder` if needed and write (then delete) a probe file in it,
     so an unwritable output fails before a simulation, not after.
     Permission bits alone would not tell (root ignores them)."""
     p = Path(folder)
     try:
-        if p.exists() and not p.is_dir():
-            raise NotADirectoryError(20, "it is a file, not a folder")
-        p.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".treebake-probe.", suffix=".tmp", dir=p)
-        os.close(fd)
-        os.unlink(probe)
+        _make_writable(p)
     except OSError as exc:
-        raise OutputError(f"cannot write to output folder {p}: "
-                          f"{exc.strerror or exc}") from None
+        raise _cannot_write(p, exc) from None
     return p
+
+
+def _missing(p: Path) -> list[Path]:
+    """`p` and those of its parents that do not exist yet, innermost first."""
+    out = []
+    for q in (p, *p.parents):
+        if q.exists() or q == q.parent:
+            break
+        out.append(q)
+    return out
+
+
+def _remove_if_empty(folders: list[Path]) -> None:
+    """rmdir each folder (innermost first) while it is empty; a folder that
+    another run has meanwhile put a file in stays, and so do its parents."""
+    for q in folders:
+        try:
+            q.rmdir()
+        except OSError:
+            return
+
+
+@contextlib.contextmanager
+def output_folder(folder: str | Path) -> Iterator[Path]:
+    """check_writable(folder) for a block that writes into it: if the block
+    fails, the folders this call created are removed again while empty, so
+    a run that fails (a grammar that does not parse, a limit) leaves no
+    empty OUT/NAME/ behind."""
+    p = Path(folder)
+    made = _missing(p)
+    try:
+        yield check_writable(p)
+    except BaseException:
+        _remove_if_empty(made)
+        raise
 
 
 def check_writable_file(path: str | Path) -> Path:
@@ -85,25 +128,71 @@ def check_writable_file(path: str | Path) -> Path:
     return p
 
 
+LOCK_TRIES = 100  # a lock file removed under us this often in a row: report busy
+
+
 @contextlib.contextmanager
-def job_lock(folder: str | Path) -> Iterator[None]:
+def job_lock(folder: str | Path) -> Iterator[Path]:
     """Hold `folder/.treebake.lock` (an exclusive flock) while a run writes
-    the folder. A second run does not wait: it fails at once with
-    BusyError, before simulating (a farm retries; a silent wait looks like
-    a hang). The kernel drops the lock when its process dies, kill -9 too;
-    the empty lock file stays (deleting it would race a new holder)."""
-    p = check_writable(folder)
-    if fcntl is None:
-        yield
-        return
-    fd = os.open(p / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o666 & ~_UMASK)
+    the folder; yields the folder (created, proven writable). A second run
+    does not wait: it fails at once with BusyError, before simulating (a
+    farm retries; a silent wait looks like a hang). The kernel drops the
+    lock when its process dies, kill -9 too.
+
+    The lock file goes when the run releases it: the holder unlinks it
+    while still holding the lock, and a run that acquires a lock checks
+    that the path still names the file it locked (fstat against stat) and
+    starts over if not, so a run that opened the file just before the
+    unlink never holds a lock that a third run, creating a new file, holds
+    too. Only a killed run leaves the (empty, unlocked) file behind. If the
+    run fails, folders this call created are removed while empty
+    (output_folder)."""
+    p = Path(folder)
+    made = _missing(p)
     try:
+        fd = _acquire(p)
+        try:
+            yield p
+        finally:
+            if fd is not None:
+                # while holding: a run that opened this file re-checks and starts over
+                with contextlib.suppress(FileNotFoundError):
+                    if os.path.samestat(os.fstat(fd), os.stat(p / LOCK_NAME)):
+                        os.unlink(p / LOCK_NAME)
+                os.close(fd)  # releases the lock
+    except BaseException:
+        _remove_if_empty(made)
+        raise
+
+
+def _acquire(p: Path) -> int | None:
+    """The locked descriptor of `p/.treebake.lock` (None without flock),
+    making `p` and proving it writable first; BusyError if another run
+    holds it."""
+    for _ in range(LOCK_TRIES):
+        try:
+            _make_writable(p)
+            if fcntl is None:
+                return None
+            fd = os.open(p / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o666 & ~_UMASK)
+        except FileNotFoundError:
+            continue  # a failed run removed the empty folder under us: make it again
+        except OSError as exc:
+            raise _cannot_write(p, exc) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise BusyError(f"{p}: another treebake run is writing this job folder (it holds "
-                            f"{LOCK_NAME}); wait for it to finish, or write elsewhere "
-                            "(--out or --name)") from None
-        yield
-    finally:
-        os.close(fd)  # releases the lock
+            os.close(fd)
+            raise _busy(p) from None
+        try:
+            if os.path.samestat(os.fstat(fd), os.stat(p / LOCK_NAME)):
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # the file we locked was released and unlinked: take the new one
+    raise _busy(p)
+
+
+def _busy(p: Path) -> BusyError:
+    return BusyError(f"{p}: another treebake run is writing this job folder (it holds "
+                     f"{LOCK_NAME}); wait for it to finish, or write elsewhere (--out or --name)")

@@ -3,9 +3,10 @@
 They ship as package data (`treebake.grammars`, `treebake.presets`; in the
 checkout the top-level `grammars/` and `presets/` folders) and are read
 through importlib.resources, so lookups work from any folder, after a wheel
-install or an editable one. Presets name grammars by relative path
-(`../grammars/oak.lsys`); both folders install side by side, so those paths
-resolve in every install.
+install or an editable one. Presets name their grammars by bundled name
+(`grammar = "oak"`, `grammars = ["forest/birch", ...]`, resolved by
+scene.py as for any scene file), not by path, so a preset copied out of
+the package (the path `treebake list presets --json` gives) still loads.
 
 Names: a grammar is its path under `grammars/` without `.lsys` (`oak`,
 `forest/birch`, `abop/fig1.24a`); a preset its file stem (`felling`).
@@ -26,7 +27,7 @@ GRAMMAR_PREFIX = "grammar:"
 
 def _folder(package: str) -> Path:
     # Traversable -> real folder: treebake installs unzipped (wheel or
-    # editable), and presets need real sibling folders for their relative paths
+    # editable), and the commands take file paths
     return Path(str(resources.files(package)))
 
 

@@ -78,10 +78,12 @@ class SwayResult:
 
 def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "default",
                  deflection: float = 0.01, at: float = 0.6, release: float = 3.0,
-                 duration: float = 12.0, fps: float = 60.0) -> SwayResult:
+                 duration: float = 12.0, fps: float = 60.0, log=None,
+                 progress=None) -> SwayResult:
     """Pull the trunk at `at` x height until its top has moved about
     `deflection` x height, release at `release` s, and measure the free
-    sway of the trunk top in the pull's direction (still air, gravity on)."""
+    sway of the trunk top in the pull's direction (still air, gravity on).
+    `log` and `progress` as for pipeline.bake_scene (the simulation's)."""
     from .grow import grow
     from .pipeline import bake_scene
     from .quality import QUALITIES
@@ -101,7 +103,7 @@ def pull_release(grammar: str | Path, seed: int | None = None, quality: str = "d
     raw["pull"] = [{"tree": 0, "force": [force, 0.0, 0.0], "release": release, "at": at,
                     "ramp": release / 2}]
     scene = parse_scene(raw, file="<pull-release>")
-    bake = bake_scene(scene)
+    bake = bake_scene(scene, log=log, progress=progress)
     tb = bake.trees[0]
     x = segment_ends(tb, [model.main_stem()[-1]])[:, 0, 0]
     t = bake.times

@@ -1,5 +1,5 @@
 """Bundled scene presets (`.toml`), shipped as package data of treebake.
 
-They name grammars by relative path (`../grammars/oak.lsys`): installed,
-`treebake/presets/` and `treebake/grammars/` stay siblings, so the paths
-resolve the same as in the checkout."""
+They name grammars by bundled name (`grammar = "oak"`, `grammars =
+["forest/birch", ...]`), not by path, so a copy of a preset in any folder
+loads the same bundled grammars (treebake.library)."""

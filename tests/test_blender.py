@@ -33,7 +33,9 @@ def test_blender_frame_k_is_the_bakes_frame_k_for_glb_and_usd(tmp_path):
     assert got["glb"]["actions"] == [[1.0, float(n)]]  # the glb's keys span frames 1..n
     assert got["usd"]["actions"] == [[1.0, float(n)]]
     assert got["usd"]["scene_range"] == [1, n]  # USD start/end codes set the scene range
+    assert got["glb"]["scene_range"] == [1, 250]  # the glTF importer leaves Blender's default
     assert got["glb"]["scene_props"] == {"frame_start": 1, "frame_end": n, "fps": bake.fps}
+    assert got["glb"]["scene_range_set"] == [1, n]  # docs/formats.md's line sets it
     worst = {"glb": 0.0, "usd": 0.0, "glb_vs_usd": 0.0}
     step = 0.0  # how far the bake moves between neighbouring frames: what an offset would cost
     for k in numbers:

@@ -96,14 +96,14 @@ def test_plain_progress_lines_without_a_terminal(root, tmp_path):
     assert quiet.stderr == ""
 
 
-def test_summary_lines_in_order_naming_every_file(root, tmp_path):
+def test_summary_lines_in_order_naming_every_file_or_sequence(root, tmp_path):
     r = run("bake", root / SAPLING, *QUICK, "--out", tmp_path, "--format", "glb,obj")
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert lines[0].startswith("baked 1 tree (1 simulated, 57 segments), 7 frames in ")
     assert lines[0].endswith("sapling.npz")
     assert lines[1].startswith("exported ") and "sapling.glb" in lines[1]
-    assert "manifest.json" in lines[1] and "obj/sapling.0001.obj" in lines[1]
+    assert "manifest.json" in lines[1] and "obj/sapling.####.obj (7 files, 0001-0007)" in lines[1]
     manifest = json.loads((tmp_path / "sapling" / "manifest.json").read_text())
     assert f"exported {len(manifest['files']) + 1} files," in lines[1]
     assert lines[2].startswith("keyframes: ")
@@ -207,3 +207,51 @@ def test_closed_stdout_or_stderr_is_no_traceback(root, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "treebake.cli", "bake", str(tmp_path / "no.lsys")],
                          stdout=subprocess.DEVNULL, check=False, preexec_fn=lambda: os.close(2))
     assert bad.returncode == 2
+
+
+TYPO = ("B takes 2 parameters in its productions (B(w,n)); B(w*0.45) has 1 and will never be "
+        "rewritten")
+
+
+@pytest.fixture
+def typo(root, tmp_path):
+    """Issue 42's sapling: `B(w*0.45)` for `B(w*0.45,5)` on line 17, column 48."""
+    path = tmp_path / "typo.lsys"
+    path.write_text((root / SAPLING).read_text().replace("B(w*0.45,5)", "B(w*0.45)"))
+    return path
+
+
+def test_a_grammar_warning_is_printed_and_strict_makes_it_an_error(typo, capsys):
+    assert main(["derive", str(typo), "--stats-only"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == f"treebake: warning: {typo}:17:48: {TYPO}"
+    assert len(err) == 2 and err[1].startswith("sapling: 98 modules")  # then the derivation
+    for command in (["derive", str(typo)], ["inspect", str(typo), "--out", str(typo.parent)]):
+        assert main([*command, "--strict"]) == 2, command
+        out, err = capsys.readouterr()
+        assert err == f"treebake: error: {typo}:17:48: {TYPO}\n" and out == "", command
+    assert not (typo.parent / "sapling").exists()  # inspect wrote nothing
+    # `2>&-`: the warning goes nowhere, the work is done
+    done = subprocess.run([sys.executable, "-m", "treebake.cli", "derive", str(typo)],
+                          stdout=subprocess.PIPE, text=True, check=False,
+                          preexec_fn=lambda: os.close(2))
+    assert done.returncode == 0 and "@leaves(1)B(0.02025)]" in done.stdout
+
+
+def test_a_scene_s_grammar_warnings_once_per_file_and_strict_before_any_work(typo, tmp_path,
+                                                                             capsys):
+    scene = tmp_path / "two.toml"
+    scene.write_text('name = "two"\n[[tree]]\ngrammar = "typo.lsys"\n'
+                     '[[tree]]\ngrammar = "typo.lsys"\nposition = [3.0, 0.0]\n'
+                     '[[tree]]\ngrammar = "sapling"\nposition = [0.0, 6.0]\n')
+    out = tmp_path / "out"
+    assert main(["bake", str(scene), "--out", str(out), "--strict"]) == 2  # full duration
+    assert capsys.readouterr().err == f"treebake: error: {typo}:17:48: {TYPO}\n"
+    assert not out.exists()
+    assert main(["bake", str(scene), *QUICK, "--out", str(out), "-q"]) == 0
+    assert capsys.readouterr().err == f"treebake: warning: {typo}:17:48: {TYPO}\n"
+    jobs = tmp_path / "jobs.toml"
+    jobs.write_text('[[job]]\nscene = "two.toml"\n[[job]]\ngrammar = "typo.lsys"\n')
+    assert main(["batch", str(jobs), "--out", str(tmp_path / "batch"), "--strict"]) == 2
+    assert capsys.readouterr().err == f"treebake: error: {typo}:17:48: {TYPO}\n"
+    assert not (tmp_path / "batch").exists()

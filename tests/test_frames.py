@@ -45,7 +45,8 @@ def test_every_format_numbers_frames_from_frame_start(files, start):
     assert report.manifest["frames"]["last"] == start + n - 1
     g = Gltf(report.folder / f"{report.folder.name}.glb")
     scene_extras = g.g.scenes[0].extras
-    assert scene_extras == {"frame_start": start, "frame_end": start + n - 1, "fps": fps}
+    assert scene_extras == {"treebake": {"frame_start": start, "frame_end": start + n - 1,
+                                         "fps": fps}}
     assert g.g.asset.extras["treebake"]["frame_start"] == start
     inputs = {s.input for a in g.g.animations for s in a.samplers}
     assert inputs

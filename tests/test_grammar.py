@@ -124,3 +124,61 @@ def test_every_library_grammar_parses(root):
     for f in files:
         g = load_grammar(f)
         assert g.productions and g.source_hash and math.isfinite(g.angle)
+
+
+SAPLING_LINE_17 = "B(w*0.45,5)"
+TYPO_MESSAGE = ("B takes 2 parameters in its productions (B(w,n)); B(w*0.45) has 1 and will "
+                "never be rewritten")
+
+
+def test_a_module_no_production_takes_is_a_located_warning(root):
+    """Issue 42: `B(w*0.45)` for `B(w*0.45,5)` baked a 12-segment sapling
+    instead of 57 without a word."""
+    text = (root / "grammars" / "sapling.lsys").read_text()
+    assert text.count(SAPLING_LINE_17) == 1
+    g = parse_grammar(text.replace(SAPLING_LINE_17, "B(w*0.45)"), file="typo.lsys")
+    (w,) = g.warnings
+    assert (w.file, w.line, w.col, w.message) == ("typo.lsys", 17, 48, TYPO_MESSAGE)
+    assert str(w) == f"typo.lsys:17:48: {TYPO_MESSAGE}"
+    assert parse_grammar(text, file="sapling.lsys").warnings == ()
+
+
+def test_no_bundled_grammar_warns(root):
+    files = sorted((root / "grammars").rglob("*.lsys"))
+    assert len(files) >= 30 and any(f.parent.name == "abop" for f in files)
+    for f in files:
+        assert load_grammar(f).warnings == (), f
+
+
+@pytest.mark.parametrize("text, found", [
+    # turtle commands and markers have no productions: never warned about
+    ("axiom: F(1)+(30)X(2)\nA -> B\n", []),
+    # several counts: one that matches is enough, wherever the module is
+    ("axiom: A(1)\nA(x) -> A(x)A(x,1)A\nA(x,y) -> A(x)\nA -> F\n", []),
+    ("axiom: A(1)\nA(x) -> A(x)\nA(x,y) -> A(1,2,3)\n",
+     [(3, 11, ("A takes 1 or 2 parameters in its productions (A(x), A(x,y)); A(1,2,3) has "
+               "3 and will never be rewritten"))]),
+    # the axiom, and a module without parameters
+    ("#define k 2\naxiom: F A\nA(n) : n > 0 -> F A(n-1)\n",
+     [(2, 10, ("A takes 1 parameter in its productions (A(n)); A has none and will never "
+               "be rewritten"))]),
+    # every stochastic alternative, whichever form it is written in
+    ("axiom: A(1)\nA(x) -(0.5)-> F A(x)\nA(x) -> [+ A(x * 2, 1)] : 0.5\n",
+     [(3, 12, ("A takes 1 parameter in its productions (A(x)); A(x * 2, 1) has 2 and will "
+               "never be rewritten"))]),
+    # a count only a context reads is a deliberate shape
+    ("axiom: S(1) A\nA -> S(2) A\nS(x) < A -> A\n", []),
+    ("axiom: B(1,2) A\nB(x) -> B(x)\nB(x,y) < A -> A\n", []),
+    # a symbol only read as context: warned when no context takes its count
+    ("axiom: S A\nS(x) < A > T(y, z) -> A T(1)\n",
+     [(1, 8, "S takes 1 parameter as context (S(x)); S has none and will never match"),
+      (2, 25, "T takes 2 parameters as context (T(y,z)); T(1) has 1 and will never match")]),
+    # declared multi-character names
+    ("modules: Apex\naxiom: Apex(1, 2)\nApex(w) -> F Apex(w)\n",
+     [(2, 8, ("Apex takes 1 parameter in its productions (Apex(w)); Apex(1, 2) has 2 and "
+              "will never be rewritten"))]),
+])
+def test_arity_warnings(text, found):
+    g = parse_grammar(text, file="t.lsys")
+    assert [(w.line, w.col, w.message) for w in g.warnings] == found
+    assert all(w.file == "t.lsys" for w in g.warnings)

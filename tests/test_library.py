@@ -1,6 +1,6 @@
 """Bundled grammars and presets by name (package data, issue 15): every
-preset loads through importlib.resources with its relative grammar paths
-resolved, names resolve the documented way, and the public API works from
+preset loads through importlib.resources with its grammars resolved by
+name, names resolve the documented way, and the public API works from
 another folder. (.ci/wheel-smoke checks the same from an installed wheel.)"""
 
 import json
@@ -27,7 +27,7 @@ def test_every_bundled_file_is_listed_and_readable():
     presets = {e.name for e in library.presets()}
     assert presets == {p.stem for p in (ROOT / "presets").glob("*.toml")}
     for e in library.presets():
-        scene = load_scene(library.preset_path(e.name))  # grammars by relative path
+        scene = load_scene(library.preset_path(e.name))  # grammars by bundled name
         assert all(t.grammar.is_file() for t in scene.trees)
         assert e.description and "\n" not in e.description
 
@@ -98,3 +98,15 @@ def test_the_wheel_lists_every_subpackage_and_bundled_file():
             rel = p.relative_to(ROOT / folder).as_posix()
             assert any(fnmatch.fnmatch(rel, g) and rel.count("/") == g.count("/")
                        for g in globs), f"{rel} is not package data"
+
+
+def test_a_preset_bake_records_its_grammars_as_before():
+    # presets name grammars by bundled name now (issue 42); a bake still
+    # records each tree's grammar relative to the preset's folder, as when
+    # the presets said "../grammars/spruce.lsys", so preset bakes keep their bytes
+    # (but for meta.scene_hash, the hash of the preset file's text)
+    from treebake.grow import grow
+
+    scene = load_scene(library.preset_path("boxes"))
+    assert {g.grammar for g in grow(scene)} == {"../grammars/sapling.lsys",
+                                                "../grammars/oak.lsys"}

@@ -20,6 +20,12 @@ kinematics, the way a viewer does, and compared with the bake; if any joint
 misses position_tolerance (at its base or its segment's tip) or
 angle_tolerance, the tree's local tolerances are halved and it is reduced
 again (after 8 halvings: no reduction for that tree).
+
+Sub-frame samples (a bake's extra samples between frames, merged into the
+sample grid): a channel may keep one only where its joint turns fast in
+that frame interval (`allowed`, bake.TreeBake.fast_samples); elsewhere the
+sample is neither a key nor checked. The world errors (the halvings and
+the report) are measured at the frames (`frames`), the frame-rate bake.
 """
 
 from __future__ import annotations
@@ -175,23 +181,42 @@ def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool,
 
 
 def _midpoint_errors(values: np.ndarray, rotation: bool,
-                     times: np.ndarray | None = None) -> np.ndarray:
+                     times: np.ndarray | None = None,
+                     allowed: np.ndarray | None = None) -> np.ndarray:
     """(C, F-2) error of predicting each inner sample from its two neighbours
-    (a first guess at the keys; `_errors` has the last word)."""
-    a, b, v = values[:, :-2], values[:, 2:], values[:, 1:-1]
-    w = np.full(values.shape[1] - 2, 0.5)
-    if times is not None:
-        w = (times[1:-1] - times[:-2]) / (times[2:] - times[:-2])
+    (a first guess at the keys; `_errors` has the last word); with
+    `allowed` (C, F), from its allowed neighbours, 0 where not allowed."""
+    v = values[:, 1:-1]
+    if allowed is None:
+        a, b = values[:, :-2], values[:, 2:]
+        w = np.full(values.shape[1] - 2, 0.5)
+        if times is not None:
+            w = (times[1:-1] - times[:-2]) / (times[2:] - times[:-2])
+        w = np.broadcast_to(w, a.shape[:2])
+    else:
+        F = values.shape[1]
+        idx = np.arange(F)
+        before = np.maximum.accumulate(np.where(allowed, idx, -1), axis=1)[:, :-2]
+        after = np.minimum.accumulate(np.where(allowed, idx, F)[:, ::-1], axis=1)[:, ::-1][:, 2:]
+        a = np.take_along_axis(values, before[..., None], axis=1)
+        b = np.take_along_axis(values, after[..., None], axis=1)
+        at = idx.astype(np.float64) if times is None else np.asarray(times, np.float64)
+        w = (at[1:-1] - at[before]) / (at[after] - at[before])
     if not rotation:
-        return np.linalg.norm(a + (b - a) * w[None, :, None] - v, axis=-1)
-    return angle_between(slerp(a, b, np.broadcast_to(w, a.shape[:2])), v)
+        err = np.linalg.norm(a + (b - a) * w[..., None] - v, axis=-1)
+    else:
+        err = angle_between(slerp(a, b, w), v)
+    return err if allowed is None else np.where(allowed[:, 1:-1], err, 0.0)
 
 
 def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
-                times: np.ndarray | None = None) -> np.ndarray:
+                times: np.ndarray | None = None,
+                allowed: np.ndarray | None = None) -> np.ndarray:
     """(C, F) bool: the samples to keep so that interpolation reproduces every
     sample of every channel within tol (C,); `times` (F,) s when the
-    samples are not evenly spaced."""
+    samples are not evenly spaced; `allowed` (C, F): the only samples a
+    channel may keep and is checked at (its first and last among them;
+    default all)."""
     C, F = values.shape[:2]
     values = values.astype(np.float32)  # twice as fast; far finer than any tolerance
     tol = tol.astype(np.float32)
@@ -200,12 +225,14 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
     # a frame its two neighbours cannot predict is kept from the start: on
     # noisy channels this settles most keys in one pass instead of many rounds
     if F > 2:
-        keep[:, 1:-1] = _midpoint_errors(values, rotation, times) > tol[:, None]
+        keep[:, 1:-1] = _midpoint_errors(values, rotation, times, allowed) > tol[:, None]
     active = np.arange(C)
     while len(active):
         k = keep[active]
         err = _errors(values[active], k, rotation, times)
         err[k] = 0.0
+        if allowed is not None:
+            err[~allowed[active]] = 0.0
         rows = (err > tol[active, None]).any(axis=1)
         if not rows.any():
             break
@@ -220,10 +247,11 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
     return keep
 
 
-def _constant(values: np.ndarray, tol: np.ndarray, rotation: bool) -> np.ndarray:
+def _constant(values: np.ndarray, tol: np.ndarray, rotation: bool,
+              allowed: np.ndarray) -> np.ndarray:
     ref = values[:, :1]
     dev = angle_between(values, ref) if rotation else np.linalg.norm(values - ref, axis=-1)
-    return (dev <= tol[:, None]).all(axis=1)
+    return ((dev <= tol[:, None]) | ~allowed).all(axis=1)
 
 
 def subtree_reach(parent: np.ndarray, base: np.ndarray, tips: np.ndarray) -> np.ndarray:
@@ -248,12 +276,16 @@ def _subtree(parent: np.ndarray, rows: np.ndarray):
     return np.where(p >= 0, new[np.maximum(p, 0)], -1)
 
 
-def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec, times=None):
-    """Worst world errors per joint over all samples: position (m, joint base
-    and segment tip) and angle (rad), as a viewer rebuilds them from the
-    kept keys (lerp, slerp, then the joint hierarchy)."""
+def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec, times=None,
+                 at=None):
+    """Worst world errors per joint over the samples `at` (indices; default
+    all): position (m, joint base and segment tip) and angle (rad), as a
+    viewer rebuilds them from the kept keys (lerp, slerp, then the joint
+    hierarchy)."""
     t_r = np.swapaxes(_interpolate(np.swapaxes(t_loc, 0, 1), keep_t, False, times), 0, 1)
     q_r = np.swapaxes(_interpolate(np.swapaxes(q_loc, 0, 1), keep_q, True, times), 0, 1)
+    if at is not None:
+        t_r, q_r, pos, rot = t_r[at], q_r[at], pos[at], rot[at]
     wp, wq = forward(parent, depth_order(parent), t_r, q_r)
     e_base = np.linalg.norm(wp - pos, axis=-1).max(axis=0)
     e_tip = np.linalg.norm(wp + qrotate(wq, seg_vec[None]) - pos - qrotate(rot, seg_vec[None]),
@@ -282,14 +314,24 @@ def _quantised(t_loc, q_loc):
 
 def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.ndarray,
             reach: np.ndarray, opts: ReduceOptions, group: np.ndarray | None = None,
-            times: np.ndarray | None = None) -> Animation:
+            times: np.ndarray | None = None, frames: np.ndarray | None = None,
+            allowed: np.ndarray | None = None) -> Animation:
     """Channels for joints with world motion pos (F, J, 3), rot (F, J, 4)
     (in the output's axes; a joint's rest orientation is the world axes);
     seg_vec (J, 3) rest base-to-tip vectors, m; reach (J,) m (subtree_reach);
     group (J,) tree index of each joint: tolerances are tightened per tree;
     times (F,) s of the samples when they are not evenly spaced (frames
-    merged with extra sub-frame samples). Channel `frames` index the samples."""
+    merged with extra sub-frame samples); frames: the indices of the frames
+    among them (default all), where the world errors are measured; allowed
+    (F, J) bool: the samples each joint's channels may keep (default all;
+    every frame must be). Channel `frames` index the samples."""
     F, J = pos.shape[:2]
+    at = None if frames is None else np.asarray(frames, np.int64)
+    is_frame = np.ones(F, bool)
+    if at is not None:
+        is_frame[:] = False
+        is_frame[at] = True
+    ok = None if allowed is None or allowed.all() else np.ascontiguousarray(allowed.T)
     group = np.zeros(J, np.int64) if group is None else np.asarray(group, np.int64)
     G = int(group.max(initial=-1)) + 1
     pos = pos.astype(np.float64)
@@ -315,14 +357,16 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
         sc = scale[group[rows]]
         tol_t = np.where(red, sc * opts.position_tolerance, 0.0)
         tol_q = np.where(red, sc * np.minimum(opts.angle_tolerance, lever[rows]), 0.0)
-        const_t[rows] = _constant(tv[rows], np.maximum(tol_t, const_position[rows]), False)
-        const_q[rows] = _constant(qv[rows], np.maximum(tol_q, CONSTANT_ANGLE), True)
-        keep_t[rows] = _kept_samples(tv, rows, const_t[rows], red, tol_t, False, times)
-        keep_q[rows] = _kept_samples(qv, rows, const_q[rows], red, tol_q, True, times)
+        ok_rows = np.ones((len(rows), F), bool) if ok is None else ok[rows]
+        const_t[rows] = _constant(tv[rows], np.maximum(tol_t, const_position[rows]), False,
+                                  ok_rows)
+        const_q[rows] = _constant(qv[rows], np.maximum(tol_q, CONSTANT_ANGLE), True, ok_rows)
+        keep_t[rows] = _kept_samples(tv, rows, const_t[rows], red, tol_t, False, times, ok)
+        keep_q[rows] = _kept_samples(qv, rows, const_q[rows], red, tol_q, True, times, ok)
         for chunk in _chunks(rows, group):
             e_pos[chunk], e_ang[chunk] = _world_error(
                 _subtree(parent, chunk), t_loc[:, chunk], q_loc[:, chunk], keep_t[chunk],
-                keep_q[chunk], pos[:, chunk], rot[:, chunk], seg_vec[chunk], times)
+                keep_q[chunk], pos[:, chunk], rot[:, chunk], seg_vec[chunk], times, at)
         g_pos = np.zeros(G)
         g_ang = np.zeros(G)
         np.maximum.at(g_pos, group, e_pos)
@@ -336,8 +380,11 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
         rows = np.flatnonzero(failing[group])
     channels = _channels(t_loc, q_loc, keep_t, keep_q, const_t, const_q)
     written = sum(len(c.frames) for c in channels)
-    report = {"frames": F, "nodes": J, "channels": 2 * J, "channels_written": len(channels),
-              "keys_full": 2 * J * F, "keys_written": written,
+    between = [int((~is_frame[c.frames]).sum()) for c in channels]
+    report = {"frames": int(is_frame.sum()), "nodes": J, "channels": 2 * J,
+              "channels_written": len(channels),
+              "keys_full": 2 * (J * F if ok is None else int(ok.sum())), "keys_written": written,
+              "subframe_keys": sum(between), "subframe_channels": sum(b > 0 for b in between),
               "trees_reduced": int(reduce.sum()), "trees_unreduced": int(G - reduce.sum()),
               "max_position_error_m": float(g_pos.max(initial=0.0)),
               "max_angle_error_rad": float(g_ang.max(initial=0.0))}
@@ -346,23 +393,27 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
 
 
 def _kept_samples(vals: np.ndarray, rows: np.ndarray, const: np.ndarray, red: np.ndarray,
-                  tol: np.ndarray, is_rot: bool, times: np.ndarray | None) -> np.ndarray:
+                  tol: np.ndarray, is_rot: bool, times: np.ndarray | None,
+                  allowed: np.ndarray | None = None) -> np.ndarray:
     """(R, F) bool: the samples written for the channels `rows` of vals
     (J, F, D), given per row whether it is constant, reduced and its
     tolerance (m or rad): a constant channel its first, an unreduced one
-    all, a reduced one its keys, or all when key times would cost more."""
+    all it may keep (`allowed` (J, F), default every sample), a reduced
+    one its keys, or all it may keep when key times would cost more."""
     F = vals.shape[1]
+    ok = np.ones((len(rows), F), bool) if allowed is None else allowed[rows]
     k = np.zeros((len(rows), F), bool)
     k[const, 0] = True
-    k[~const & ~red] = True
+    k[~const & ~red] = ok[~const & ~red]
     sel = ~const & red
     if sel.any():
-        k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot, times)
+        k[sel] = reduce_keys(vals[rows[sel]], tol[sel], is_rot, times,
+                             None if allowed is None else ok[sel])
         # a reduced channel needs its own key times (4 bytes a key); when
         # that costs more than it saves, keep every frame (shared times)
         width = vals.shape[2] * 4
-        dense = sel & (k.sum(axis=1) * (width + 4) >= F * width)
-        k[dense] = True
+        dense = sel & (k.sum(axis=1) * (width + 4) >= ok.sum(axis=1) * width)
+        k[dense] = ok[dense]
     return k
 
 

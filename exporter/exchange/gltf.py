@@ -15,6 +15,9 @@ only where it changes. Static trees are plain meshes with no joints and no
 animation. Key times: frame f at (frame_start + f) / fps s.
 `asset.extras.treebake` holds the frame grid (fps, frames, frame_start) and
 the keyframe reduction's world tolerances (`reduction`), for treebake diff.
+glTF has no scene frame range: the scene's `extras.treebake` holds it
+(frame_start, frame_end, fps) for a DCC to set (Blender makes it the
+scene's custom property `treebake`; docs/formats.md says what each needs).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..bake import Bake
+from ..bake import FAST_TURN_DEG, Bake
 from ..fileio import write_bytes
 from ..names import joint_names
 from .anim import Animation, ReduceOptions, animate, subtree_reach
@@ -219,8 +222,8 @@ class _Document:
         if self.extras:
             asset["extras"] = {"treebake": self.extras}
         scene = {"name": self.name, "nodes": self.roots}
-        if self.scene_extras:  # Blender makes these the scene's custom properties
-            scene["extras"] = self.scene_extras
+        if self.scene_extras:  # Blender makes them the scene's custom properties
+            scene["extras"] = {"treebake": self.scene_extras}
         doc = {"asset": asset, "scene": 0, "scenes": [scene],
                "nodes": self.nodes, "meshes": self.meshes, "materials": self.materials}
         if self.textures:
@@ -307,12 +310,13 @@ class AnimationPart:
 def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: bool,
                      opts: ReduceOptions) -> AnimationPart | None:
     first: dict[int, int] = {}
-    parents, pos, rot, vec, reach, group = [], [], [], [], [], []
+    parents, pos, rot, vec, reach, group, allowed = [], [], [], [], [], [], []
     n = 0
     for g, i in enumerate(trees):
         t = bake.trees[i]
         first[i] = n
         _, p, q = t.samples(bake.times)
+        allowed.append(t.fast_samples(bake.times))  # sub-frame samples where a part turns fast
         parents.append(np.where(t.seg_parent >= 0, t.seg_parent + n, -1))
         pos.append(points_y_up(p))
         rot.append(quats_y_up(q))
@@ -333,11 +337,13 @@ def _group_animation(bake: Bake, trees: list[int], times: np.ndarray, objects: b
         vec.append(np.zeros((k, 3)))
         reach.append(np.asarray(o.sizes, np.float64))
         group.append(len(trees) + np.arange(k))
+        allowed.append(np.ones((len(times), k), bool))
     if not parents:
         return None
     anim = animate(np.concatenate(parents), np.concatenate(pos, axis=1),
                    np.concatenate(rot, axis=1), np.concatenate(vec), np.concatenate(reach),
-                   opts, np.concatenate(group), times=times)
+                   opts, np.concatenate(group), times=times,
+                   frames=np.searchsorted(times, bake.times), allowed=np.concatenate(allowed, 1))
     return AnimationPart(anim, times, first, obj_first)
 
 
@@ -346,7 +352,9 @@ def scene_animation(bake: Bake, trees: list[int], objects: bool,
     """Channels for the animated trees in `trees` (and the projectiles),
     reduced together (vectorised), each tree with its own error check.
     Trees on the frame grid share one part; a tree with extra sub-frame
-    samples gets a part of its own on its merged grid."""
+    samples gets a part of its own on its merged grid, where a joint keeps
+    them only inside the frame intervals where it turns fast
+    (TreeBake.fast_samples)."""
     moving = [i for i in trees if not bake.trees[i].static]
     plain = [i for i in moving if not len(bake.trees[i].extra_times)]
     parts = [_group_animation(bake, plain, np.asarray(bake.times, np.float64), objects, opts)]
@@ -366,6 +374,8 @@ def build(bake: Bake, name: str, meshes: list[TreeMesh], trees: list[int], objec
     (Blender, three.js's AnimationUtils) is the bake's frame number."""
     n = len(bake.times)
     fps = bake.fps
+    # the frame range, which glTF cannot say: frame_start..frame_end at fps
+    # key every frame of the bake (keys at frame / fps s)
     hint = {"frame_start": frame_start, "frame_end": frame_start + n - 1, "fps": fps}
     # the frame grid, so a reader (treebake diff) can sample reduced channels,
     # and the reduction's world tolerances: how far the file may be from its bake
@@ -460,6 +470,8 @@ def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
         result.animation["frames"] = len(bake.times)
         result.animation["extra_samples"] = sum(len(t.extra_times) for t in bake.trees
                                                 if not t.static)
+        result.animation["subframe_turn_deg"] = FAST_TURN_DEG
+        result.animation["errors_at"] = "frames"
     return result
 
 
@@ -467,8 +479,9 @@ def merge_reports(reports: list[dict]) -> dict:
     if not reports:
         return {}
     out = {k: sum(r[k] for r in reports) for k in ("nodes", "channels", "channels_written",
-                                                   "keys_full", "keys_written",
-                                                   "trees_reduced", "trees_unreduced")}
+                                                   "keys_full", "keys_written", "subframe_keys",
+                                                   "subframe_channels", "trees_reduced",
+                                                   "trees_unreduced")}
     out["frames"] = reports[0]["frames"]
     out["max_position_error_m"] = max(r["max_position_error_m"] for r in reports)
     out["max_angle_error_rad"] = max(r["max_angle_error_rad"] for r in reports)

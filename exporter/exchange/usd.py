@@ -7,8 +7,10 @@ Stage metadata: upAxis "Y" (coordinates converted like glTF:
 framesPerSecond = the bake's fps, startTimeCode = frame_start, endTimeCode =
 frame_start + frames - 1 (time code = frame_start + bake time x fps: frame
 numbers like the OBJ sequence's; extra sub-frame samples get fractional
-codes), defaultPrim = the job's root Xform. Joints carry the glTF joint names (names.py,
-`oak_trunk_2_1_s3`) in a path hierarchy that follows the segments; the
+codes, on a skeleton only inside the frame intervals where one of its
+joints turns more than bake.FAST_TURN_DEG), defaultPrim = the job's root
+Xform. Joints carry the glTF joint names (names.py, `oak_trunk_2_1_s3`)
+in a path hierarchy that follows the segments; the
 original segment paths are in the Skeleton's `treebake:segmentPaths`
 attribute. Static trees are plain meshes.
 """
@@ -47,6 +49,7 @@ class UsdResult:
     files: list[Path] = field(default_factory=list)
     joints: int = 0
     time_codes: tuple[float, float] = (1.0, 1.0)
+    subframe_codes: int = 0  # fractional time codes written, summed over skeletons
     validation_errors: list[str] = field(default_factory=list)
 
 
@@ -83,6 +86,7 @@ class _Writer:
         self.materials: dict[str, object] = {}
         self.maps = maps or {}  # material -> (texture path relative to the file, cutout)
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
+        self.subframe_codes = 0  # fractional time codes written, summed over skeletons
 
     def ident(self, name: str) -> str:
         return self.Tf.MakeValidIdentifier(str(name)) or "unnamed"
@@ -205,6 +209,11 @@ class _Writer:
         anim = self.UsdSkel.Animation.Define(self.stage, f"{path}/Skel/Anim")
         anim.CreateJointsAttr(Vt.TokenArray(tokens))
         times, positions, rotations = t.samples(self.bake.times)
+        # a skeleton's sub-frame codes hold every joint: one is kept where any
+        # joint turns fast in that frame interval (TreeBake.fast_samples)
+        kept = t.fast_samples(self.bake.times).any(axis=1)
+        self.subframe_codes += int(kept.sum()) - len(self.bake.times)
+        times, positions, rotations = times[kept], positions[kept], rotations[kept]
         pos = points_y_up(positions)
         rot = continuous(qnormalize(quats_y_up(rotations).astype(np.float64)), axis=0)
         t_loc, q_loc = local_transforms(par, pos, rot)
@@ -285,6 +294,7 @@ def export_usd(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
         if progress is not None:
             progress(i + 1, len(meshes))
     w.objects()
+    result.subframe_codes = w.subframe_codes
     path = Path(out) / f"{name}{'.usda' if ascii else '.usd'}"
     result.files.append(write_bytes(path, w.save(path)))
     if check:

@@ -3,7 +3,8 @@
 The syntax follows *The Algorithmic Beauty of Plants* (ABOP) and cpfg/L-Py
 closely enough that grammars can be pasted from the book; `docs/grammar.md`
 is the reference. Every problem is a `GrammarError` naming file, line and
-column.
+column; a module no production can ever rewrite (legal, almost always a
+typo) is a `GrammarWarning`, located the same way, on the grammar.
 """
 
 from __future__ import annotations
@@ -83,6 +84,21 @@ class PhysicsDefaults:
 
 
 @dataclass(frozen=True)
+class GrammarWarning:
+    """Legal text that is almost always a mistake, located like a
+    GrammarError (line and column 1-based). The parser records it on the
+    Grammar; the CLI prints it (or, with --strict, fails on it)."""
+
+    file: str
+    line: int
+    col: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.col}: {self.message}"
+
+
+@dataclass(frozen=True)
 class Grammar:
     """A parsed grammar. Lengths are in grammar units; `scale` converts them
     to metres and `width_scale` converts widths (diameters) to metres."""
@@ -109,6 +125,7 @@ class Grammar:
     physics: PhysicsDefaults = field(default_factory=PhysicsDefaults)
     constants: tuple[tuple[str, float], ...] = ()
     description: str = ""
+    warnings: tuple[GrammarWarning, ...] = ()  # in file order
 
 
 # ---------------------------------------------------------------------------
@@ -298,8 +315,9 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
     settings = _settings(headers, constants, declared, file)
     if "axiom" not in headers:
         raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
-    axiom = _axiom(*headers["axiom"], constants, declared, file)
-    productions = _parse_productions(parts.productions, constants, declared, file)
+    axiom, written = _axiom(*headers["axiom"], constants, declared, file)
+    productions, successors = _parse_productions(parts.productions, constants, declared, file)
+    warnings = _arity_warnings([*written, *successors], productions, file)
 
     physics_keys = {field_name(k) for k in PHYSICS}
     physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
@@ -317,6 +335,7 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
         productions=productions,
         physics=physics,
         constants=tuple(sorted(constants.items())),
+        warnings=warnings,
         **kwargs,
     )
 
@@ -409,8 +428,10 @@ def _settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, flo
 
 
 def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],
-           declared: tuple[str, ...], file: str) -> tuple[Module, ...]:
-    """The `axiom:` setting's modules, parameters evaluated."""
+           declared: tuple[str, ...], file: str
+           ) -> tuple[tuple[Module, ...], list[tuple[int, _RawModule]]]:
+    """The `axiom:` setting's modules, parameters evaluated, and as written
+    (line, module)."""
     err = _err_at(file, lineno)
     raw = scan_modules(value, col, declared, err)
     if not raw:
@@ -421,7 +442,7 @@ def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],
         params = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
                        for t, c in m.args)
         axiom.append((m.symbol, params))
-    return tuple(axiom)
+    return tuple(axiom), [(lineno, m) for m in raw]
 
 
 def _patterns(text: str, col0: int, declared, err, what: str) -> tuple[Pattern, ...]:
@@ -454,13 +475,16 @@ class _ProductionLine:
     successor: tuple[SuccessorModule, ...]
     prob: float | None
     line: int
+    written: tuple[_RawModule, ...]  # the successor as written, with columns
 
 
 def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float],
-                       declared: tuple[str, ...], file: str) -> tuple[Production, ...]:
+                       declared: tuple[str, ...], file: str
+                       ) -> tuple[tuple[Production, ...], list[tuple[int, _RawModule]]]:
     """The productions of the production lines (line number, text), in file
     order; stochastic alternatives become one production, probabilities
-    normalised to sum to 1."""
+    normalised to sum to 1. Also every successor module as written (line,
+    module), alternatives included."""
     parsed = [_parse_production_line(lineno, line, constants, declared, file)
               for lineno, line in lines]
 
@@ -493,7 +517,7 @@ def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float]
             first.left, first.pred, first.right, first.condition,
             tuple(it.successor for it in items), tuple(it.prob / total for it in items), file,
             first.line))
-    return tuple(productions)
+    return tuple(productions), [(it.line, m) for it in parsed for m in it.written]
 
 
 def _parse_production_line(lineno: int, line: str, constants: dict[str, float],
@@ -549,7 +573,8 @@ def _parse_production_line(lineno: int, line: str, constants: dict[str, float],
         for mod in mods
     )
     key = (left, pred, right, cond_text.strip() if cond_text else None)
-    return _ProductionLine(key, left, pred, right, condition, successor, prob, lineno)
+    return _ProductionLine(key, left, pred, right, condition, successor, prob, lineno,
+                           tuple(mods))
 
 
 def _predecessor(lhs: str, declared: tuple[str, ...],
@@ -576,3 +601,52 @@ def _predecessor(lhs: str, declared: tuple[str, ...],
         if any(p.symbol in "[]" for p in ctx):
             raise err(f"brackets in the {where} context are not supported", 0)
     return left, pred[0], right
+
+
+# ---------------------------------------------------------------------------
+# warnings
+
+
+def _arity_warnings(written: list[tuple[int, _RawModule]], productions: tuple[Production, ...],
+                    file: str) -> tuple[GrammarWarning, ...]:
+    """A warning for every module (line, module as written) whose symbol has
+    productions, or is matched as context, but none with its parameter count:
+    derivation copies it unchanged for ever, which is legal and almost always
+    a typo (`B(w*0.45)` for `B(w*0.45,5)`). Symbols no production names
+    (turtle commands, leaves) are never warned about."""
+    preds: dict[str, dict[int, Pattern]] = {}  # symbol -> count -> first pattern
+    contexts: dict[str, dict[int, Pattern]] = {}
+    for p in productions:
+        preds.setdefault(p.pred.symbol, {}).setdefault(len(p.pred.params), p.pred)
+        for c in (*p.left, *p.right):
+            contexts.setdefault(c.symbol, {}).setdefault(len(c.params), c)
+    warnings = []
+    for lineno, m in sorted(written, key=lambda w: (w[0], w[1].col)):
+        own, ctx = preds.get(m.symbol, {}), contexts.get(m.symbol, {})
+        n = len(m.args)
+        if (not own and not ctx) or n in own or n in ctx:
+            continue
+        text = m.symbol + (f"({','.join(t for t, _ in m.args)})" if m.args else "")
+        has = f"has {n}" if n else "has none"
+        if own:
+            where = _takes(own, "in its productions")
+            extra = {k: c for k, c in ctx.items() if k not in own}
+            if extra:
+                where += f" and {_takes(extra, 'as context')}"
+            fate = "will never be rewritten"
+        else:
+            where, fate = _takes(ctx, "as context"), "will never match"
+        warnings.append(GrammarWarning(file, lineno, m.col + 1,
+                                       f"{m.symbol} takes {where}; {text} {has} and {fate}"))
+    return tuple(warnings)
+
+
+def _takes(shapes: dict[int, Pattern], where: str) -> str:
+    """'2 parameters in its productions (B(w,n))', '1 or 2 parameters ...
+    (B(x), B(x,y))', 'no parameters ... (F)': the counts patterns take."""
+    counts = sorted(shapes)
+    noun = "parameter" if counts == [1] else "parameters"
+    amount = "no" if counts == [0] else " or ".join(map(str, counts))
+    shown = ", ".join(p.symbol + (f"({','.join(p.params)})" if p.params else "")
+                      for _, p in sorted(shapes.items()))
+    return f"{amount} {noun} {where} ({shown})"

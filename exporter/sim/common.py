@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from ..bake import FAST_TURN_DEG
 from ..rig import Rig
 from ..rotations import cross
 from .loads import MAX_ACCELERATION, BoneProps
@@ -155,7 +156,7 @@ def tree_motion(quats: np.ndarray, pivots: np.ndarray, bones: slice, events: lis
                       np.array([e[2] for e in extra]).reshape(-1, nb, 3))
 
 
-FAST_TURN = np.radians(45.0)  # rad: a bone turning more between frames gets sub-frame samples
+FAST_TURN = np.radians(FAST_TURN_DEG)  # rad: a bone turning more between frames: sub-frame samples
 MAX_EXTRA = 8  # sub-frame samples per frame at most
 
 

@@ -40,8 +40,13 @@ def main() -> None:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=glb)
     result["glb"] = sample(frames)
-    result["glb"]["scene_props"] = {k: bpy.context.scene[k] for k in bpy.context.scene.keys()
-                                    if k in ("frame_start", "frame_end", "fps")}
+    scene = bpy.context.scene
+    if "treebake" in scene:  # the glTF scene's extras.treebake, a custom property
+        r = scene["treebake"]
+        result["glb"]["scene_props"] = r.to_dict()
+        # docs/formats.md's line for Blender: the scene range from that property
+        scene.frame_start, scene.frame_end = r["frame_start"], r["frame_end"]
+        result["glb"]["scene_range_set"] = [scene.frame_start, scene.frame_end]
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.wm.usd_import(filepath=usd)
     result["usd"] = sample(frames)
