@@ -40,6 +40,7 @@ from .batch_summary import format_table, summary
 from .errors import BusyError, TreebakeError
 from .fileio import job_lock, write_text
 from .fingerprint import ResumeFingerprint, code_fingerprint
+from .resources import Budget
 from .versions import NOT_INSTALLED, UNKNOWN, VersionChange, runtime_versions, version_changes
 
 __all__ = ["DASK_WORKER_TIMEOUT", "MAX_ATTEMPTS", "Job", "JobResult", "code_fingerprint",
@@ -173,7 +174,8 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             if progress is not None:
                 def tick(done, total, name=job.name):
                     progress(name, done, total)
-            bake = bake_scene(scene, solver=job.solver, progress=tick)
+            bake = bake_scene(scene, solver=job.solver, progress=tick,
+                              budget=Budget(folder=folder))
             bake_path = save_bake(bake, folder / f"{job.name}.npz")
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]

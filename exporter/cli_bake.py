@@ -14,6 +14,7 @@ from .cli_progress import plural, progress_bar, stage_progress
 from .errors import InputError
 from .fileio import output_folder
 from .library import resolve
+from .resources import DEFAULT_MAX_SEGMENTS, Budget, parse_size
 
 
 def load_job(path: str, args):
@@ -80,13 +81,17 @@ def cmd_bake(args) -> int:
         timestep = _parse_timestep(args.timestep)
     if args.format is None and scene.formats:
         args.format = ",".join(f for f in scene.formats if f != "npz")
+    budget = Budget(None if args.max_memory is None else parse_size(args.max_memory), out,
+                    DEFAULT_MAX_SEGMENTS if args.max_segments is None else args.max_segments)
+    if budget.max_segments < 1:
+        raise InputError(f"--max-segments must be >= 1, got {args.max_segments}")
     opts = None
     if args.format is not None:  # checked now, not after the simulation
         opts = export_options(args, allow_none=True)
         check_options(opts)
     with job_lock(out):  # proves the folder writable; one run per job folder at a time
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
-                          workers=workers, timestep=timestep)
+                          workers=workers, timestep=timestep, budget=budget)
         path = save_bake(bake, out / f"{out.name}.npz")
         exported = None
         if opts is not None and opts.formats:

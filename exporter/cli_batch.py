@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .cli_grammar import warn_grammar
 from .cli_progress import BatchDisplay, plural
-from .errors import InputError, TreebakeError
+from .errors import InputError, OutputError, TreebakeError
 from .fileio import write_text
 
 BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is finished yet
@@ -72,7 +72,11 @@ def cmd_batch(args) -> int:
     results = run_batch(jobs, args.out, workers, args.force, args.executor, args.scheduler,
                         report=show, worker_timeout=args.worker_timeout)
     data = summary(results, time.perf_counter() - start, show.workers)
-    write_text(summary_path, json.dumps(data, indent=2) + "\n")
+    unwritten = None
+    try:
+        write_text(summary_path, json.dumps(data, indent=2) + "\n")
+    except OutputError as exc:  # a full disk: the table below still says what happened
+        unwritten = exc
     if args.json:
         print(json.dumps(data))
     else:
@@ -82,7 +86,10 @@ def cmd_batch(args) -> int:
             if data[extra]:
                 line += f", {data[extra]} {extra}"
         print(f"{line} in {data['wall_seconds']:.1f} s with {plural(data['workers'], 'worker')}"
-              f"; summary: {summary_path}")
+              + ("; summary not written" if unwritten else f"; summary: {summary_path}"))
+    if unwritten:
+        print(f"treebake: error: {unwritten}", file=sys.stderr)
+        return 1
     if data["interrupted"]:
         print("treebake: interrupted; rerun the same command to resume", file=sys.stderr)
         return 130

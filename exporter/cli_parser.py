@@ -165,6 +165,12 @@ COMMANDS: tuple[Command, ...] = (
          opt("--workers", type=int, default=None,
              help="processes sharing the simulation (default: the machine's cores; the bake "
                   "is the same with any number)"),
+         opt("--max-memory", metavar="SIZE",
+             help="refuse, before simulating, a bake whose estimated peak memory is larger, "
+                  "e.g. 8G (default: the memory the machine has available)"),
+         opt("--max-segments", type=int, default=None,
+             help="segments a tree may have (default 100,000: a larger one is refused "
+                  "as soon as it is derived)"),
          json_option("print the summary as JSON"),
          opt("-q", "--quiet", action="store_true", help="no progress or notes on stderr"),
          opt("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, preview "

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import BusyError, OutputError
+from .resources import disk_full
 
 try:
     import fcntl
@@ -33,9 +34,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; files are for sharing
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        full = disk_full(target, exc) if isinstance(exc, OSError) else None
+        if full is not None:
+            raise full from None
         raise
 
 

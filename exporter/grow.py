@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
+from .resources import Budget, check_segments, count_segments
 from .scene import Scene, TreeSpec
 from .turtle import interpret
 
@@ -36,25 +37,35 @@ def _as_named(grammar: Path, scene_file: str) -> str:
         return Path(grammar).name
 
 
-def grow(scene: Scene) -> list[GrownTree]:
+def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
     """Derive and interpret every tree of the scene, placed in the world.
-    Identical (grammar, seed, iterations) are derived once."""
+    Identical (grammar, seed, iterations) are derived once. Every tree is
+    derived and its segments counted against `budget` (resources.py)
+    before any is drawn: a tree too large is refused in about the time its
+    derivation takes."""
+    budget = budget or Budget()
     grammars: dict[Path, object] = {}
-    cache: dict[tuple, TreeModel] = {}
-    out = []
+    derived: dict[tuple, object] = {}
     for spec in scene.trees:
-        named = _as_named(spec.grammar, scene.file)
         g = grammars.get(spec.grammar)
         if g is None:
             g = grammars[spec.grammar] = load_grammar(spec.grammar)
         seed = g.seed if spec.seed is None else spec.seed
         key = (spec.grammar, seed, spec.iterations)
+        if key not in derived:
+            d = derived[key] = derive(g, seed, spec.iterations)
+            check_segments(spec.grammar, count_segments(d.modules), budget)
+    cache: dict[tuple, TreeModel] = {}
+    out = []
+    for spec in scene.trees:
+        g = grammars[spec.grammar]
+        seed = g.seed if spec.seed is None else spec.seed
+        key = (spec.grammar, seed, spec.iterations)
         model = cache.get(key)
         if model is None:
-            d = derive(g, seed, spec.iterations)
-            model = cache[key] = interpret(d.modules, g, seed=seed)
+            model = cache[key] = interpret(derived[key].modules, g, seed=seed)
         m = placed(model, spec.position, spec.rotation)
         m.name = spec.name
-        out.append(GrownTree(spec, m, g.source_hash, seed, named, m.bounds(), m.height))
+        out.append(GrownTree(spec, m, g.source_hash, seed, _as_named(spec.grammar, scene.file),
+                             m.bounds(), m.height))
     return out
-

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..grow import GrownTree
 from ..quality import QUALITIES, Quality
 from ..rig import RigOptions, build_rig
@@ -76,7 +77,10 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
         elif not reached[i]:
             out.static[g.model.name] = "no force reaches it (gravity is balanced by the prestress)"
             out.culled["no_force"] += 1
-        rig = build_rig(g.model, RigOptions(min_bone_length=q.bone_length * height[i]))
+        try:
+            rig = build_rig(g.model, RigOptions(min_bone_length=q.bone_length * height[i]))
+        except InputError as exc:  # a tree the rig cannot take: say whose grammar it is
+            raise InputError(f"{g.spec.grammar}: {exc}") from None
         out.trees.append(SimTree(g.model.name, rig, q.planes, direction[i], cuts.get(i),
                                  pulls.get(i, []), active=bool(reached[i] and seen[i])))
         out.qualities.append(q)
