@@ -81,6 +81,14 @@ def cmd_bake(args) -> int:
         timestep = _parse_timestep(args.timestep)
     if args.format is None and scene.formats:
         args.format = ",".join(f for f in scene.formats if f != "npz")
+    if args.scheduler:  # a bad address or a cluster of other versions: before any work
+        if args.solver == "full":
+            raise InputError("--scheduler spreads the planar LOD's chunks over a Dask cluster; "
+                             "--solver full simulates the scene as one model, in one process")
+        from .sim.distributed import check_versions, connect
+
+        with connect(args.scheduler) as client:
+            check_versions(client)
     budget = Budget(None if args.max_memory is None else parse_size(args.max_memory), out,
                     DEFAULT_MAX_SEGMENTS if args.max_segments is None else args.max_segments)
     if budget.max_segments < 1:
@@ -91,7 +99,8 @@ def cmd_bake(args) -> int:
         check_options(opts)
     with job_lock(out):  # proves the folder writable; one run per job folder at a time
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
-                          workers=workers, timestep=timestep, budget=budget)
+                          workers=workers, timestep=timestep, budget=budget,
+                          scheduler=args.scheduler)
         path = save_bake(bake, out / f"{out.name}.npz")
         exported = None
         if opts is not None and opts.formats:

@@ -165,6 +165,9 @@ COMMANDS: tuple[Command, ...] = (
          opt("--workers", type=int, default=None,
              help="processes sharing the simulation (default: the machine's cores; the bake "
                   "is the same with any number)"),
+         opt("--scheduler", metavar="ADDRESS",
+             help="simulate the planar LOD's chunks on the Dask cluster at tcp://HOST:PORT "
+                  "(pip install 'treebake[dask]'; the bake is the same as a local one)"),
          opt("--max-memory", metavar="SIZE",
              help="refuse, before simulating, a bake whose estimated peak memory is larger, "
                   "e.g. 8G (default: the memory the machine has available)"),

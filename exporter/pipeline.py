@@ -19,7 +19,8 @@ from .sim.solver import SolveResult
 
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
                log=None, progress=None, workers: int = 1,
-               timestep: float | None = None, budget: Budget | None = None) -> Bake:
+               timestep: float | None = None, budget: Budget | None = None,
+               scheduler: str | None = None) -> Bake:
     """Grow, rig, simulate and bake a scene. `solver`: "planar" (the planar
     LOD) or "full" (the MuJoCo reference); `quality` overrides the scene's
     (and every tree's); `log(text)` hears what people should; `progress
@@ -27,7 +28,9 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     share the planar LOD's chunks; `timestep` (s) is the full reference's
     step (default: its own); `budget` what it may use (resources.Budget;
     default: the machine's available memory, 100,000 segments a tree): a
-    bake that would not fit is refused (InputError) before it simulates.
+    bake that would not fit is refused (InputError) before it simulates;
+    `scheduler` a Dask scheduler's address (tcp://HOST:PORT) whose workers
+    simulate the planar LOD's chunks instead of local processes.
     Deterministic: the same inputs and versions give the same bake,
     whatever `workers`."""
     started = time.perf_counter()
@@ -45,7 +48,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
     result = SolveResult({})
     if any(t.active for t in rigged.trees):
-        result = simulate(kind, rigged, scene, workers, timestep, log, progress)
+        result = simulate(kind, rigged, scene, workers, timestep, log, progress, scheduler)
         timing.update(result.timing)
     bake = bake_from(scene, kind, grown, rigged, result, timing)
     bake.timing["wall_seconds"] = round(time.perf_counter() - started, 3)

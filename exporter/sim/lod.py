@@ -9,7 +9,7 @@ motion depends on which trees share its tier. Chunks are therefore fixed by
 the scene alone — trees grouped by quality level, then split in scene order
 into chunks of about CHUNK_SEGMENTS segments — and a parallel run only
 changes which process simulates a chunk: bit-identical bakes with any
-number of workers. Scenes with projectiles (which can hit any tree) run as
+number of workers, local or on a Dask cluster (distributed.py). Scenes with projectiles (which can hit any tree) run as
 one chunk."""
 
 from __future__ import annotations
@@ -54,11 +54,18 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
 
 def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene: Scene,
              loads: SceneLoads, workers: int = 1, log=None,
-             progress=None) -> list[ChunkResult]:
-    """Each chunk of `plan` through its tiers, in `workers` processes;
+             progress=None, scheduler: str | None = None) -> list[ChunkResult]:
+    """Each chunk of `plan` through its tiers, in `workers` processes or as
+    tasks on the Dask scheduler at `scheduler` (distributed.py);
     `progress(done, total)` hears the planned work done (progress.py)."""
     tick = None if progress is None else ChunkProgress(trees, plan, scene, progress)
-    results = _simulate(trees, plan, scene, loads, workers, log, tick)
+    if scheduler:
+        from .distributed import run_chunks
+
+        results = run_chunks(scheduler, [([trees[i] for i in members], scene, q, loads)
+                                         for q, members in plan], tick, log)
+    else:
+        results = _simulate(trees, plan, scene, loads, workers, log, tick)
     if tick is not None:
         tick.finish()
     return results
@@ -91,13 +98,13 @@ class PlanarLOD:
     for any number of workers."""
 
     def __init__(self, trees: list[SimTree], qualities: list[Quality], scene: Scene,
-                 loads: SceneLoads, workers: int = 1, log=None):
+                 loads: SceneLoads, workers: int = 1, log=None, scheduler: str | None = None):
         self.trees, self.qualities, self.scene = trees, qualities, scene
-        self.loads, self.workers = loads, workers
+        self.loads, self.workers, self.scheduler = loads, workers, scheduler
         self.log = log or (lambda msg: None)
 
     def run(self, progress=None) -> SolveResult:
         plan = chunks(self.trees, self.qualities, whole=bool(self.scene.projectiles))
         results = simulate(self.trees, plan, self.scene, self.loads, self.workers, self.log,
-                           progress)
+                           progress, self.scheduler)
         return solve_result(self.trees, plan, results, self.scene)

@@ -42,14 +42,15 @@ def require_mujoco() -> None:
 
 
 def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int = 1,
-             timestep: float | None = None, log=None, progress=None) -> SolveResult:
+             timestep: float | None = None, log=None, progress=None,
+             scheduler: str | None = None) -> SolveResult:
     """The scene's active trees through the solver of `kind` (`timestep` s:
-    the full reference's step, default its own; `workers` processes share
-    the planar LOD's chunks); its result with the energy audit in its meta
+    the full reference's step, default its own; `workers` processes, or the
+    Dask cluster at `scheduler`, share the planar LOD's chunks); its result with the energy audit in its meta
     (meta["energy"]) and the audit's warnings among its notes, and for
     people one log line per tree and kind of event, then the notes."""
     log = log or (lambda msg: None)
-    result = solver_for(kind, rigged, scene, workers, timestep, log).run(progress)
+    result = solver_for(kind, rigged, scene, workers, timestep, log, scheduler).run(progress)
     result.meta["energy"] = audit_motions(result.motions, scene.fps)
     result.notes = result.notes + gain_notes(result.meta["energy"])
     for line in summary({name: m.events for name, m in result.motions.items()}) + result.notes:
@@ -58,12 +59,17 @@ def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int =
 
 
 def solver_for(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int = 1,
-               timestep: float | None = None, log=None) -> Solver:
+               timestep: float | None = None, log=None,
+               scheduler: str | None = None) -> Solver:
     """The solver of `kind` for the scene's rigged trees."""
     if kind is SolverKind.PLANAR:
         from .lod import PlanarLOD
 
-        return PlanarLOD(rigged.trees, rigged.qualities, scene, rigged.loads, workers, log)
+        return PlanarLOD(rigged.trees, rigged.qualities, scene, rigged.loads, workers, log,
+                         scheduler)
+    if scheduler:
+        raise InputError("--scheduler spreads the planar LOD's chunks over a Dask cluster; "
+                         "--solver full simulates the scene as one model, in one process")
     from .reference import ReferenceSolver
 
     return ReferenceSolver(rigged.trees, scene, scene.quality, rigged.loads, log=log,
