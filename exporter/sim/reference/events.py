@@ -232,7 +232,9 @@ class ReferenceEvents:
         jnt = g.hinge_jnt[rows][g.hinge_jnt[rows] >= 0]
         m.jnt_stiffness[jnt] = 0.0
         m.jnt_limited[jnt] = 0
-        geom = m.body_geomadr[body]
+        # every geom of theirs: capsule, envelope, the base's sphere and disc
+        geom = np.concatenate([np.arange(a, a + k) for a, k in
+                               zip(m.body_geomadr[body], m.body_geomnum[body])])
         m.geom_contype[geom] = 0
         m.geom_conaffinity[geom] = 0
         d.xfrc_applied[body] = 0.0
