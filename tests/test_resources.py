@@ -16,10 +16,12 @@ from treebake.pipeline import bake_scene
 from treebake.resources import Budget, estimate, parse_size
 from treebake.scene import parse_scene
 
-# the CLI in a child that reports its own peak RSS (kB, Linux) on its last stderr line
-RUN = ("import resource, sys\nfrom treebake.cli import main\ncode = main(sys.argv[1:])\n"
-       "print('peak_kb', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
-       "sys.exit(code)\n")
+# the CLI in a child that reports its own peak RSS (kB, Linux's VmHWM: unlike
+# getrusage's ru_maxrss, not inherited from the test process across exec)
+# on its last stderr line
+RUN = ("import re, sys\nfrom treebake.cli import main\ncode = main(sys.argv[1:])\n"
+       "hwm = re.search(r'VmHWM:\\s+(\\d+)', open('/proc/self/status').read()).group(1)\n"
+       "print('peak_kb', hwm, file=sys.stderr)\nsys.exit(code)\n")
 
 
 def run(tmp_path, *args):
