@@ -65,6 +65,13 @@ STABILITY_CASES = ("stiff x1", "stiff x100", "stiff x10000", "mass 1:10^2", "mas
                    "felling willow", "felling palm", "felling bamboo", "crate breaks a stem",
                    "blast breaks branches", "tornado uproots", "10 min gusty", "10 min calm")
 
+# the stress suite's measured cost (stress.CPU_SECONDS; tests/test_stability_plan.py
+# checks these against it)
+STABILITY_FULL = ("1.9 h of CPU, as long in wall time on 2 idle cores (one process; the "
+                  "felled willow alone takes 1.4 h)")
+STABILITY_QUICK = "about 2 min on the bundled trees (26 of the 112 runs)"
+STABILITY_QUICK_BUDGET = "135 CPU s (a run that would end past 5 min is skipped)"
+
 QUALITY = ("draft", "default", "final")
 OUT = opt("--out", default="out", help="output folder (default: out)")
 JOB_NAME = opt("--name", help="job name: the output subfolder (default: the bake's scene)")
@@ -263,20 +270,31 @@ COMMANDS: tuple[Command, ...] = (
         "overlapping and near-zero segments, a 200-segment chain, wind to 70 m/s, huge "
         "blasts, 10-minute runs) and the event cases (felling each species, a crate, a blast "
         "and a tornado breaking trees) on both solvers, the LOD at every quality level; write "
-        "OUT/report.md and report.json. Exit 1 if a case fails.",
-        (opt("--out", default="out/stability", help="output folder (default: out/stability)"),
-         opt("--quick", action="store_true", help="leave out the 10-minute runs"),
+        "OUT/report.md and report.json. Exit 1 if a case fails. With GRAMMAR, the cases on a "
+        "species' tree run on its tree instead. The full suite is "
+        f"{STABILITY_FULL}; --quick is {STABILITY_QUICK}. One progress line per run on stderr.",
+        (opt("grammar", nargs="?", metavar="GRAMMAR",
+             help="grammar file (.lsys) or bundled grammar name: the cases on the sapling and "
+                  "the species (wind, blasts, felling, crate, tornado, 10-minute runs) run on "
+                  "its tree (default: the bundled trees)"),
+         opt("--out", default="out/stability", help="output folder (default: out/stability)"),
+         opt("--quick", action="store_true",
+             help="the runs that found the most, most telling first (events, huge blasts, "
+                  "70 m/s gusts, felling, at the levels that failed), within a budget of "
+                  f"{STABILITY_QUICK_BUDGET}; on a large grammar what does not fit is left "
+                  "out, said before the first run"),
          opt("--solver", choices=("planar", "full", "both"), default="both",
              help="planar: the LOD; full: the MuJoCo reference; both (default)"),
          opt("--quality", nargs="*", choices=QUALITY,
-             help="the LOD's quality levels to run (default: all three)"),
+             help="the LOD's quality levels to run (default: all three; with --quick, each "
+                  "quick run's own)"),
          opt("--engine", choices=("auto", "pymunk"), default="auto",
              help="auto (default): the engine table of docs/physics.md; pymunk: the pymunk "
                   "tier for everything that leaves the linear tier"),
          opt("--case", nargs="*", metavar="NAME",
              help="only these cases (quote names with spaces): "
-                  f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; the long ones "
-                  "(felling the big species, the crate, 10-minute runs) only without --quick)"),
+                  f"{', '.join(repr(c) for c in STABILITY_CASES)} (default: all; with "
+                  "--quick, the quick runs of these)"),
          json_option("print the results as JSON"), QUIET)),
 )
 
@@ -304,7 +322,9 @@ EXAMPLES = {
     "list": "  treebake list                  # bundled grammars and presets, by name\n"
             "  treebake list presets --json   # with each file's path\n",
     "accuracy": "  treebake accuracy --species sapling --scenarios breeze gale --duration 2\n",
-    "stability": "  treebake stability --quick --solver planar\n"
+    "stability": "  treebake stability --quick                  # a few minutes\n"
+                 "  treebake stability oak --quick              # the oak's tree in the cases\n"
+                 "  treebake stability --quick --solver planar\n"
                  "  treebake stability --case 'stiff x100' 'wind 70 m/s'\n",
 }
 

@@ -4,6 +4,7 @@ PLAIN_PROGRESS_SECONDS and one at the end."""
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
@@ -35,7 +36,7 @@ def progress_bar(label: str):
         elapsed = time.perf_counter() - start
         share = min(1.0, done / total) if total > 0 else 1.0
         eta = elapsed / share * (1.0 - share) if share > 0 else float("nan")
-        left = f"{eta:.0f} s left" if eta == eta else "estimating"
+        left = "estimating" if math.isnan(eta) else f"{eta:.0f} s left"
         finished[0] = share >= 1.0
         if not tty:
             if share >= 1.0:
@@ -135,4 +136,35 @@ class BatchDisplay:
         if self.quiet:
             return
         sys.stderr.write(("\r\033[K" if self.tty else "") + text + "\n")
+        sys.stderr.flush()
+
+
+class CaseDisplay:
+    """Progress of a suite's runs on stderr (`treebake stability`): one line
+    per run, `case 3/24 wind 70 m/s, planar draft: passed, 2.1 s (...)`. On
+    a terminal the line shows from the run's start (`running, about 4 CPU
+    s`) and is completed in place when it ends; elsewhere (logs, CI) it is
+    written when the run ends. Call as `display(event, k, n, label, text)`,
+    event "start" or "end"."""
+
+    def __init__(self, quiet: bool = False) -> None:
+        self.quiet = quiet
+        self.tty = sys.stderr.isatty()
+        self.open = False  # a start line waits for its end on the terminal
+
+    def __call__(self, event: str, k: int, n: int, label: str, text: str = "") -> None:
+        if self.quiet:
+            return
+        line = f"case {k}/{n} {label}: {text}"
+        if event == "start":
+            if self.tty:  # one terminal line, or `\r` cannot take it back
+                import shutil
+
+                sys.stderr.write(line[:max(20, shutil.get_terminal_size().columns - 1)])
+                self.open = True
+            else:
+                return
+        else:
+            sys.stderr.write(("\r\033[K" if self.open else "") + line + "\n")
+            self.open = False
         sys.stderr.flush()

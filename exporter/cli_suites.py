@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 from .errors import InputError
@@ -35,23 +36,38 @@ def cmd_accuracy(args) -> int:
 
 
 def cmd_stability(args) -> int:
-    from .stress import cases, stability
+    from .cli_progress import CaseDisplay
+    from .stress import cases, cpu_seconds, quick_cases, stability
 
-    names = {c.name for c in cases(True)}
+    grammar = None
+    if args.grammar:
+        from .library import resolve
+        from .lsystem import load_grammar
+
+        grammar = resolve(args.grammar, ("grammar",))
+        load_grammar(grammar)  # a missing or broken grammar fails here, before any run
+    names = [c.name for c in cases(True, grammar)]
+    quick = quick_cases(grammar) if args.quick else names
     for n in args.case or []:
         if n not in names:
             raise InputError(f"unknown case {n!r} (choose from {', '.join(sorted(names))})")
+        if n not in quick:
+            raise InputError(f"case {n!r} is not in --quick's plan (its cases: "
+                             f"{', '.join(quick)}); leave out --quick to run it")
     solvers = ("planar", "full") if args.solver == "both" else (args.solver,)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
-    levels = tuple(args.quality) if args.quality else ("draft", "default", "final")
-    results = stability(args.out, long=not args.quick, solvers=solvers, only=args.case,
-                        levels=levels, log=log, engine=args.engine)
+    levels = tuple(args.quality) if args.quality else None
+    start, cpu = time.perf_counter(), cpu_seconds()
+    results = stability(args.out, solvers=solvers, only=args.case,
+                        levels=levels, log=log, engine=args.engine, quick=args.quick,
+                        grammar=grammar, progress=CaseDisplay(quiet=args.quiet))
     failed = [r for r in results if not r.passed]
     if args.json:
         from dataclasses import asdict
 
         print(json.dumps([asdict(r) for r in results], default=str))
     else:
-        print(f"{len(results) - len(failed)} of {len(results)} passed; "
+        print(f"{len(results) - len(failed)} of {len(results)} passed in "
+              f"{time.perf_counter() - start:.0f} s ({cpu_seconds() - cpu:.0f} CPU s); "
               f"written {Path(args.out) / 'report.md'}, report.json")
     return 1 if failed else 0

@@ -33,10 +33,18 @@ branches, a tornado uprooting a tree). Measured on the baked motion
 
 What each solver adapted (inertia floors, capped loads, refined steps,
 breaks) is listed from the bake's notes: never silent.
+
+The full suite takes about two hours of CPU (CPU_SECONDS, measured;
+docs/physics.md, "The stress suite's cost"). `--quick` (quick_plan) takes
+the runs that found the most, most telling first (QUICK), up to
+QUICK_BUDGET CPU s by those measurements, and says up front what does not
+fit; on a grammar's tree (cases(grammar=...)) the runs are estimated from
+the measured trees nearest in size.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 import math
@@ -49,7 +57,7 @@ import numpy as np
 from .bake import Bake
 from .errors import SimulationError
 from .fileio import write_text
-from .library import grammar_path
+from .library import grammar_path, grammars_folder
 from .pipeline import bake_scene
 from .quality import QUALITIES
 from .rotations import angle_between
@@ -71,12 +79,20 @@ LEVELS = ("draft", "default", "final")  # the planar LOD's quality levels
 class Case:
     name: str
     what: str
-    grammar: str  # grammar text, or "species:NAME" for a bundled grammar
+    grammar: str  # grammar text, "species:NAME" (a bundled grammar) or "file:PATH"
     scene: dict  # scene keys (the tree is added)
     quiet: float  # s: when the forcing has stopped
     duration: float
     long: bool = False  # part of the full run only
     event: bool = False  # an event case: breaks and falls are expected
+    # the tree the case is about: "species:NAME" or "file:PATH" (its grammar,
+    # strengths dropped or not); "" for a case's own small tree
+    tree: str = ""
+
+    @property
+    def kind(self) -> str:
+        """The case without its tree's name: what CPU_SECONDS knows it by."""
+        return "felling" if self.name.startswith("felling ") else self.name
 
 
 @dataclass
@@ -97,21 +113,42 @@ class Result:
     notes: list[str] = field(default_factory=list)
     error: str = ""
     engines: str = ""  # the tree's engines, as its bake records them (info["solver"])
+    cpu: float = math.nan  # CPU s of the bake (this process, every thread, and its children)
 
 
-def _sapling(extra: str = "", drop: tuple[str, ...] = ("rupture", "anchor")) -> str:
-    lines = [ln for ln in grammar_path("sapling").read_text().splitlines()
+def _unbreakable(path: Path, drop: tuple[str, ...] = ("rupture", "anchor")) -> str:
+    """A grammar's text without its strengths (nothing breaks, nothing uproots)."""
+    lines = [ln for ln in path.read_text().splitlines()
              if not any(ln.startswith(d + ":") for d in drop)]
-    return "\n".join(lines) + "\n" + extra
+    return "\n".join(lines) + "\n"
 
 
 def _gust(speed: float, until: float) -> dict:
     return {"wind": {"speed": speed, "turbulence": 0.3, "ramp": 0.5, "end": until}}
 
 
-def cases(long: bool = True) -> list[Case]:
+def bundled_name(grammar: str | Path) -> str | None:
+    """A grammar file's bundled name (`oak`, `forest/birch`); None outside
+    the bundle."""
+    try:
+        return Path(grammar).resolve().relative_to(grammars_folder().resolve()).with_suffix(
+            "").as_posix()
+    except ValueError:
+        return None
+
+
+def tree_name(grammar: str | Path) -> str:
+    """How the cases name a tree grown from `grammar` (a file): a bundled
+    grammar by its name, any other by its file's stem."""
+    return bundled_name(grammar) or Path(grammar).stem
+
+
+def cases(long: bool = True, grammar: str | Path | None = None) -> list[Case]:
     """The stress cases; `long` adds the ten-minute runs and the events on
-    the big species."""
+    the big species. With `grammar` (a file), every case on a tree of the
+    bundled species (the sapling's wind, blasts, tornado and ten-minute
+    runs, the felling, the crate) runs on that grammar's tree instead, and
+    the six fellings are one; the cases on their own small trees stay."""
     twig = "axiom: !(0.5)F(2)F(2)[&(60){k}@cone({cone})!({d})F(0.15)F(0.15)@leaves(1)F(0.1)]\n"
     out = []
     for factor in (1, 100, 10_000):
@@ -141,39 +178,56 @@ def cases(long: bool = True) -> list[Case]:
                     "then released", WOOD + "axiom: !(0.05)" + "F(0.025)" * 200 + "\n",
                     {"pull": [{"tree": 0, "force": [7.0, 0, 0], "release": 1.5, "at": 1.0,
                                "ramp": 0.5}]}, 1.5, 6.5))
+    if grammar is None:
+        small, plain = "sapling", _unbreakable(grammar_path("sapling"))
+        a_small = "a sapling"
+        fellings = (("sapling", False), ("spruce", False), ("oak", True), ("willow", True),
+                    ("palm", True), ("bamboo", True))
+        crate = "oak"
+
+        def source(species: str) -> str:
+            return f"species:{species}"
+    else:
+        path = Path(grammar).resolve()
+        small = crate = tree_name(path)
+        plain, fellings = _unbreakable(path), ((small, False),)
+        a_small = f"the {small}"
+
+        def source(species: str) -> str:
+            return f"file:{path}"
     for speed in (45, 70):
-        out.append(Case(f"wind {speed} m/s", f"sapling in {speed} m/s gusts (no breaking)",
-                        _sapling(), _gust(speed, 3.0), 4.0, 9.0))
+        out.append(Case(f"wind {speed} m/s", f"{small} in {speed} m/s gusts (no breaking)",
+                        plain, _gust(speed, 3.0), 4.0, 9.0, tree=source(small)))
     for charge, dist in ((2, 6), (50, 5), (500, 6)):
         out.append(Case(f"blast {charge} kg at {dist} m",
-                        f"{charge} kg TNT {dist} m from a sapling (no breaking)", _sapling(),
+                        f"{charge} kg TNT {dist} m from {a_small} (no breaking)", plain,
                         {"explosion": [{"position": [dist, 0.0, 1.0], "time": 0.5,
-                                        "charge": charge}]}, 1.5, 7.0))
+                                        "charge": charge}]}, 1.5, 7.0, tree=source(small)))
     # events: breaking and felling with the species' own strengths
-    for species, long_case in (("sapling", False), ("spruce", False), ("oak", True),
-                               ("willow", True), ("palm", True), ("bamboo", True)):
+    for species, long_case in fellings:
         out.append(Case(f"felling {species}", f"{species} cut at its base, falls on its hinge",
-                        f"species:{species}", {"cut": [{"tree": 0, "time": 0.5,
-                                                        "direction": 30.0}]},
-                        7.0, 9.0, long=long_case, event=True))
-    out.append(Case("crate breaks a stem", "a 150 kg crate at 11 m/s into the oak's stem",
-                    "species:oak", {"projectile": [{"shape": "box", "size": 0.8, "mass": 150.0,
+                        source(species), {"cut": [{"tree": 0, "time": 0.5, "direction": 30.0}]},
+                        7.0, 9.0, long=long_case, event=True, tree=source(species)))
+    out.append(Case("crate breaks a stem", f"a 150 kg crate at 11 m/s into the {crate}'s stem",
+                    source(crate), {"projectile": [{"shape": "box", "size": 0.8, "mass": 150.0,
                                                     "position": [0.0, -9.0, 3.0],
                                                     "velocity": [0.0, 11.0, 3.0],
                                                     "time": 0.5}]},
-                    4.0, 6.0, long=True, event=True))
-    out.append(Case("blast breaks branches", "10 kg TNT 4 m from a sapling, breaking on",
-                    "species:sapling", {"explosion": [{"position": [4.0, 0.0, 1.0], "time": 0.5,
-                                                       "charge": 10.0}]}, 3.0, 6.0, event=True))
-    out.append(Case("tornado uproots", "an EF2 vortex through a sapling, breaking on",
-                    "species:sapling", {"vortex": [{"start": [-30.0, 0.0], "velocity": [12.0, 0.0],
-                                                    "max_speed": 55.0, "core_radius": 15.0,
-                                                    "end": 4.0}]}, 4.0, 7.0, event=True))
+                    4.0, 6.0, long=True, event=True, tree=source(crate)))
+    out.append(Case("blast breaks branches", f"10 kg TNT 4 m from {a_small}, breaking on",
+                    source(small), {"explosion": [{"position": [4.0, 0.0, 1.0], "time": 0.5,
+                                                   "charge": 10.0}]}, 3.0, 6.0, event=True,
+                    tree=source(small)))
+    out.append(Case("tornado uproots", f"an EF2 vortex through {a_small}, breaking on",
+                    source(small), {"vortex": [{"start": [-30.0, 0.0], "velocity": [12.0, 0.0],
+                                                "max_speed": 55.0, "core_radius": 15.0,
+                                                "end": 4.0}]}, 4.0, 7.0, event=True,
+                    tree=source(small)))
     out.append(Case("10 min gusty", "ten minutes of gusts, then ten seconds of calm",
-                    _sapling(), _gust(12, 600.0), 602.0, 612.0, long=True))
+                    plain, _gust(12, 600.0), 602.0, 612.0, long=True, tree=source(small)))
     out.append(Case("10 min calm", "ten minutes after a pull, prestressed, no wind",
-                    _sapling(), {"pull": [{"tree": 0, "force": [5.0, 0, 0], "release": 1.0}]},
-                    1.0, 600.0, long=True))
+                    plain, {"pull": [{"tree": 0, "force": [5.0, 0, 0], "release": 1.0}]},
+                    1.0, 600.0, long=True, tree=source(small)))
     return [c for c in out if long or not c.long]
 
 
@@ -306,13 +360,15 @@ def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -
         if engine in ("pymunk", "reference"):
             quality = replace(quality, nonlinear=engine)
             label += f" {engine}"
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), cpu_seconds()
     try:
         from tempfile import TemporaryDirectory
 
         with TemporaryDirectory() as tmp:
             if case.grammar.startswith("species:"):
                 path = grammar_path(case.grammar.split(":", 1)[1])
+            elif case.grammar.startswith("file:"):
+                path = Path(case.grammar.split(":", 1)[1])
             else:
                 path = Path(tmp) / "g.lsys"
                 path.write_text(case.grammar)
@@ -322,8 +378,8 @@ def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -
     except SimulationError as exc:
         return Result(case.name, label, case.what, False, math.nan, math.nan, math.nan,
                       math.nan, math.nan, math.nan, 0, time.perf_counter() - start, False,
-                      error=str(exc))
-    seconds = time.perf_counter() - start
+                      error=str(exc), cpu=cpu_seconds() - cpu)
+    seconds, cpu = time.perf_counter() - start, cpu_seconds() - cpu
     finite = all(np.isfinite(t.positions).all() and np.isfinite(t.rotations).all()
                  for t in bake.trees)
     events = [e["kind"] for e in bake.trees[0].info.get("events", [])]
@@ -342,7 +398,7 @@ def run(case: Case, solver: str, level: str = "default", engine: str = "auto") -
               and gain <= GAIN_TOLERANCE and not rise > RISE_TOLERANCE)
     return Result(case.name, label, case.what, finite, growth, gain, gap, rise, spin, rest,
                   broken, seconds, passed, list(bake.meta.get("notes", [])),
-                  engines=bake.trees[0].info.get("solver", "static"))
+                  engines=bake.trees[0].info.get("solver", "static"), cpu=cpu)
 
 
 def report_markdown(results: list[Result]) -> str:
@@ -363,8 +419,8 @@ def report_markdown(results: list[Result]) -> str:
              "impulse, steps split during impulsive loads; docs/physics.md); joint gaps can "
              "open on the pymunk tier only."), "",
              ("| case | solver | pass | energy growth | audit gain | max gap | COM rise m | "
-             "broken | max spin rad/s | rest after s | wall s | what | adapted |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "broken | max spin rad/s | rest after s | wall s | CPU s | what | adapted |"),
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         rest = "-" if math.isinf(r.rest) else f"{r.rest:.1f}"
         rise = "-" if math.isnan(r.rise) else f"{r.rise:.3f}"
@@ -373,33 +429,336 @@ def report_markdown(results: list[Result]) -> str:
         notes = "; ".join(heads) or ("error: " + r.error if r.error else "")
         lines.append(f"| {r.case} | {r.solver} | {'PASS' if r.passed else 'FAIL'} | "
                      f"{r.energy_growth:.3g} | {r.gain:.3g} | {r.gap:.3g} | {rise} | "
-                     f"{r.broken} | {r.spin:.3g} | {rest} | {r.seconds:.1f} | {r.what} | "
+                     f"{r.broken} | {r.spin:.3g} | {rest} | {r.seconds:.1f} | {r.cpu:.1f} | {r.what} | "
                      f"{notes} |")
     return "\n".join(lines) + "\n"
 
 
-def stability(out: str | Path = "out/stability", long: bool = True,
-              solvers: tuple[str, ...] = ("planar", "full"), only: list[str] | None = None,
-              levels: tuple[str, ...] = LEVELS, log=None, engine: str = "auto") -> list[Result]:
-    """Run the cases (`only` these names) on the solvers, the planar LOD at
-    `levels` with its nonlinear `engine` (see run); write OUT/report.json
-    and report.md."""
-    log = log or (lambda msg: None)
-    results = []
-    for case in cases(long):
+# The suite's cost: CPU s of each run, one after another in one process, as
+# `treebake stability` (engine auto) ran them on a 2-core machine shared
+# with other work (the larger of two runs where there were two; they
+# differed by up to 25 %), by the case's kind and tree ("" for a case's
+# own small tree): planar draft, default, final, full (docs/physics.md,
+# "The stress suite's cost"). The bundled suite's runs are all here; the
+# other species' are QUICK's runs on them (`treebake stability NAME`),
+# and the spruce's blast breaking branches on the reference was stopped
+# after 1790 s (at least that). NA: not measured.
+COLUMNS = ("planar draft", "planar default", "planar final", "full")
+NA = math.nan  # not measured
+CPU_SECONDS: dict[str, dict[str, tuple[float, float, float, float]]] = {
+    "stiff x1": {"": (1.6, 1.6, 1.4, 0.8)},
+    "stiff x100": {"": (1.4, 1.3, 1.3, 0.9)},
+    "stiff x10000": {"": (1.7, 1.3, 1.4, 0.8)},
+    "mass 1:10^2": {"": (1.3, 1.3, 1.6, 1.4)},
+    "mass 1:10^4": {"": (1.4, 1.9, 2, 0.9)},
+    "cone 0.5 deg": {"": (1.4, 1.7, 1.6, 0.9)},
+    "cone 5 deg": {"": (1.4, 1.5, 1.6, 1)},
+    "cone 90 deg": {"": (1.7, 1.5, 1.5, 0.9)},
+    "overlapping": {"": (1.5, 1.6, 1.9, 1.2)},
+    "near-zero segments": {"": (2.1, 1.6, 1.3, 1)},
+    "1 mm between 1 m": {"": (0.4, 0.4, 0.5, 0.7)},
+    "200-segment chain": {"": (0.1, 0.8, 1.3, 71.9)},
+    "wind 45 m/s": {"sapling": (0.6, 0.8, 1.3, 2.4)},
+    "wind 70 m/s": {"sapling": (0.6, 0.9, 1.3, 2.3), "palm": (0.6, NA, NA, 6.9),
+        "bamboo": (6.1, NA, NA, 65.9), "oak": (1.6, NA, NA, 22.3), "spruce": (1.3, NA, NA, 37.2),
+        "willow": (4.6, NA, NA, NA)},
+    "blast 2 kg at 6 m": {"sapling": (0.8, 0.8, 1.5, 3.5)},
+    "blast 50 kg at 5 m": {"sapling": (4.3, 5.1, 5.5, 6.7), "palm": (0.6, NA, 4.2, NA),
+        "bamboo": (8.1, NA, 51.7, NA), "oak": (4.8, NA, 13, NA), "spruce": (157.8, NA, 273.2, NA),
+        "willow": (8.9, NA, NA, NA)},
+    "blast 500 kg at 6 m": {"sapling": (13.8, 14.3, 16, 14.9), "palm": (2.3, NA, NA, NA),
+        "bamboo": (19.9, NA, NA, NA), "oak": (22.7, NA, NA, NA), "spruce": (162.7, NA, NA, NA),
+        "willow": (25.7, NA, NA, NA)},
+    "felling": {"sapling": (1.1, 2.6, 3.8, 6.3), "palm": (2, 8.4, 13.9, 24.6),
+        "bamboo": (3, 25.7, 46.2, 86.3), "oak": (4.9, 44.3, 62.9, 103.9),
+        "spruce": (6.2, 46.5, 90.1, 136.3), "willow": (35.8, 1477.1, 1450.2, 2059.4)},
+    "crate breaks a stem": {"sapling": (1.3, NA, NA, NA), "palm": (1.5, NA, NA, NA),
+        "bamboo": (2.9, NA, NA, NA), "oak": (1.9, 12.6, 50.4, 62.9), "spruce": (5.3, NA, NA, NA),
+        "willow": (3.2, NA, NA, NA)},
+    "blast breaks branches": {"sapling": (6, 6.4, 8.5, 10.2), "palm": (0.6, NA, NA, 13.5),
+        "bamboo": (5.1, NA, NA, 54.3), "oak": (5.2, NA, NA, 44.7), "spruce": (17.9, NA, NA, 1790),
+        "willow": (4.4, NA, NA, NA)},
+    "tornado uproots": {"sapling": (1.3, 3.5, 4.7, 5.5), "palm": (1.5, 9.6, NA, NA),
+        "bamboo": (2.5, 21.6, NA, NA), "oak": (6.9, 45.6, NA, NA), "spruce": (7.3, 104.7, NA, NA),
+        "willow": (31.8, NA, NA, NA)},
+    "10 min gusty": {"sapling": (27.9, 30.3, 68.2, 187.9)},
+    "10 min calm": {"sapling": (28.5, 25.8, 53.2, 143.6)},
+}
+# the measured trees' bones (planar draft, and default, final and full),
+# for scaling a cost to another tree
+BONES: dict[str, tuple[int, int]] = {"sapling": (39, 57), "palm": (52, 149), "bamboo": (196, 588),
+    "oak": (246, 767), "spruce": (203, 946), "willow": (566, 2818)}
+START_CPU = 0.3  # s: a bake's start-up, whatever its tree
+# a run's CPU grows as the tree's bones to about this power: from the
+# sapling to the bamboo the same run costs 0.7-1.4 powers of the bones
+# ratio, from the oak to the willow felled at default 2.7; scaling is from
+# the nearest measured trees, so the power matters little inside their range
+BONES_POWER = 1.5
+
+# `--quick`: the runs that found the most per CPU second, most telling
+# first, as (kind, solver, level, the bundled tree it takes without a
+# grammar). The suite's failures (git log, docs/physics.md) were in events
+# and big loads on the nonlinear engines, most at draft (the coarsest step)
+# and final: the blasted sapling (1.2x its energy at draft), the tornado
+# (1.9x at draft, 2.1x at default), felled trees landing (the sapling 2.4 %
+# at draft and 2.3 % at final, the willow 5.6 % at draft), the 70 m/s gust
+# (3.1 %), the 500 kg blast (4.7 %), the 50 kg blast (a joint gap at draft,
+# 2.1 % at final), the crate's oak sunk 0.81 m into the ground. No failure
+# of the cases on their own small trees (stiffness, mass ratios, cones,
+# tiny segments) is recorded; they cost about 1 s each and come last.
+# With a grammar its tree takes every tree's place (two fellings at draft
+# are one run). Runs past QUICK_BUDGET are left out, said up front.
+# CPU s of the estimates: a run's CPU varies by 10-25 % from one run to the
+# next and the command's start-up takes 3 s, so that the measured CPU stays
+# near 150 s, half the 5 minutes of wall time (one process, 2 idle cores)
+QUICK_BUDGET = 135.0
+QUICK_LIMIT = 300.0  # CPU s: the 5 minutes; no quick run starts that would end past them
+QUICK: tuple[tuple[str, str, str, str], ...] = (
+    ("blast breaks branches", "planar", "draft", "sapling"),
+    ("tornado uproots", "planar", "draft", "sapling"),
+    ("felling", "planar", "draft", "spruce"),
+    ("wind 70 m/s", "planar", "draft", "sapling"),
+    ("blast 500 kg at 6 m", "planar", "draft", "sapling"),
+    ("crate breaks a stem", "planar", "draft", "oak"),
+    ("felling", "planar", "final", "sapling"),
+    ("blast 50 kg at 5 m", "planar", "final", "sapling"),
+    ("tornado uproots", "planar", "default", "sapling"),
+    ("felling", "planar", "default", "sapling"),
+    ("felling", "full", "default", "sapling"),
+    ("blast breaks branches", "full", "default", "sapling"),
+    ("wind 70 m/s", "full", "default", "sapling"),
+    ("blast 50 kg at 5 m", "planar", "draft", "sapling"),
+    ("felling", "planar", "draft", "willow"),
+    ("1 mm between 1 m", "planar", "draft", ""),
+    ("near-zero segments", "planar", "draft", ""),
+    ("stiff x10000", "planar", "draft", ""),
+    ("mass 1:10^4", "planar", "draft", ""),
+    ("cone 0.5 deg", "planar", "draft", ""),
+    ("overlapping", "planar", "draft", ""),
+    ("200-segment chain", "planar", "final", ""),
+    ("stiff x10000", "full", "default", ""),
+    ("mass 1:10^4", "full", "default", ""),
+    ("near-zero segments", "full", "default", ""),
+    ("1 mm between 1 m", "full", "default", ""),
+)
+
+
+@dataclass
+class Run:
+    """One bake of the suite: a case on a solver ("planar" at `level`, or
+    "full"), with its estimated CPU s."""
+
+    case: Case
+    solver: str
+    level: str = "default"
+    estimate: float = math.nan
+
+    @property
+    def label(self) -> str:
+        return f"{self.case.name}, {self.solver_label}"
+
+    @property
+    def solver_label(self) -> str:
+        return f"planar {self.level}" if self.solver == "planar" else self.solver
+
+
+def cpu_seconds() -> float:
+    """CPU s of this process (every thread) and its finished children."""
+    total = time.process_time()
+    try:
+        import resource
+    except ImportError:  # Windows: no children's times
+        return total
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return total + children.ru_utime + children.ru_stime
+
+
+@functools.lru_cache(maxsize=16)
+def tree_bones(tree: str) -> tuple[int, int]:
+    """Bones of the tree a case's `tree` grows (its grammar as bundled or in
+    a file) at draft, and at default (final and the full reference rig it
+    as default does: one bone per segment)."""
+    from .grow import grow
+    from .rig import RigOptions, build_rig
+
+    kind, name = tree.split(":", 1)
+    path = grammar_path(name) if kind == "species" else Path(name)
+    scene = parse_scene({"name": "bones", "tree": [{"grammar": str(path)}]}, file="<bones>")
+    model = grow(scene)[0].model
+    out = []
+    for level in ("draft", "default"):
+        length = QUALITIES[level].bone_length * max(model.height, 1e-3)
+        out.append(int(build_rig(model, RigOptions(min_bone_length=length)).seg_bone.max()) + 1)
+    return out[0], out[1]
+
+
+def estimate(case: Case, solver: str, level: str = "default") -> float:
+    """CPU s of a run, from CPU_SECONDS: as measured if its tree was
+    measured, else scaled by (bones ratio)^BONES_POWER (bones at the run's
+    level) from the measured trees next in size below and above it, the
+    larger of the two (the same load costs trees of one size alike only
+    roughly: a blast that breaks the sapling's joints sends it to the
+    reference, the palm's it leaves in the linear tier). nan for a run the
+    table does not know."""
+    column = COLUMNS.index(f"planar {level}" if solver == "planar" else solver)
+    known = {t: v[column] for t, v in CPU_SECONDS.get(case.kind, {}).items()
+             if not math.isnan(v[column])}
+    if not case.tree:
+        return known.get("", math.nan)
+    source, name = case.tree.split(":", 1)
+    tree = name if source == "species" else bundled_name(name)
+    if tree in known:
+        return known[tree]
+    if not known:
+        return math.nan
+    at = 0 if column == 0 else 1
+    bones = max(tree_bones(case.tree)[at], 1)
+    below = [t for t in known if BONES[t][at] <= bones]
+    above = [t for t in known if BONES[t][at] >= bones]
+    near = {max(below, key=lambda t: BONES[t][at])} if below else set()
+    near |= {min(above, key=lambda t: BONES[t][at])} if above else set()
+    return max(START_CPU + (known[t] - START_CPU) * (bones / BONES[t][at]) ** BONES_POWER
+               for t in near)
+
+
+def plan(long: bool = True, solvers: tuple[str, ...] = ("planar", "full"),
+         levels: tuple[str, ...] = LEVELS, only: list[str] | None = None,
+         grammar: str | Path | None = None) -> list[Run]:
+    """The full suite's runs (without `long`: no ten-minute runs, no events
+    on the big species): every case on the solvers, the planar LOD at each
+    of `levels`; `only` these case names."""
+    runs = []
+    for case in cases(long, grammar):
         if only and case.name not in only:
             continue
-        runs = [("planar", lv) for lv in levels if "planar" in solvers]
+        if "planar" in solvers:
+            runs += [Run(case, "planar", lv) for lv in levels]
         if "full" in solvers:
-            runs.append(("full", "default"))
-        for solver, level in runs:
-            r = run(case, solver, level, engine)
-            log(f"{case.name:<22} {r.solver:<19} {'PASS' if r.passed else 'FAIL'}  growth "
-                f"{r.energy_growth:.3g}  gain {r.gain:.3g}  gap {r.gap:.3g}  "
-                f"spin {r.spin:.3g}  {r.seconds:.1f} s" + (f"  {r.error}" if r.error else ""))
-            results.append(r)
+            runs.append(Run(case, "full"))
+    for r in runs:
+        r.estimate = estimate(r.case, r.solver, r.level)
+    return runs
+
+
+def quick_plan(solvers: tuple[str, ...] = ("planar", "full"),
+               levels: tuple[str, ...] | None = None, only: list[str] | None = None,
+               grammar: str | Path | None = None,
+               budget: float = QUICK_BUDGET) -> tuple[list[Run], list[Run]]:
+    """`--quick`: QUICK's runs on the solvers (the planar ones at `levels`
+    if given, else at QUICK's), `only` these case names, in QUICK's order,
+    each taken while the estimates so far fit `budget` (CPU s). Returns the
+    runs and those left out (over the budget or not estimated)."""
+    by_name = {c.name: c for c in cases(True, grammar)}
+    chosen: list[Run] = []
+    seen = set()
+    for kind, solver, level, species in QUICK:
+        if solver not in solvers:
+            continue
+        case = next((c for c in by_name.values() if c.kind == kind and (
+            grammar is not None or not c.tree or c.tree == f"species:{species}")), None)
+        if case is None or (only and case.name not in only):
+            continue
+        for lv in (levels or (level,)) if solver == "planar" else ("default",):
+            if (case.name, solver, lv) not in seen:
+                seen.add((case.name, solver, lv))
+                chosen.append(Run(case, solver, lv, estimate(case, solver, lv)))
+    runs, left, total = [], [], 0.0
+    for r in chosen:
+        if not math.isnan(r.estimate) and total + r.estimate <= budget:
+            runs.append(r)
+            total += r.estimate
+        else:
+            left.append(r)
+    return runs, left
+
+
+def quick_cases(grammar: str | Path | None = None) -> list[str]:
+    """The names of the cases QUICK can run (at some solver and level)."""
+    runs, left = quick_plan(grammar=grammar, budget=math.inf)
+    return list(dict.fromkeys(r.case.name for r in runs + left))
+
+
+def stability(out: str | Path = "out/stability", long: bool = True,
+              solvers: tuple[str, ...] = ("planar", "full"), only: list[str] | None = None,
+              levels: tuple[str, ...] | None = None, log=None, engine: str = "auto",
+              quick: bool = False, grammar: str | Path | None = None, progress=None,
+              budget: float = QUICK_BUDGET) -> list[Result]:
+    """Run the cases (`only` these names) on the solvers, the planar LOD at
+    `levels` (None: all; with `quick`, QUICK's) with its nonlinear `engine`
+    (see run); on `grammar`'s tree for the cases on a species (see cases);
+    `quick`: the budgeted selection (quick_plan; a run that would end past
+    QUICK_LIMIT CPU s, by the CPU spent and its estimate, is skipped), else
+    every run (plan, `long`). Says the plan and what it leaves out to `log`
+    first; `progress(event, k, n, label, text)` hears "start" and "end" of
+    the k-th of n runs (`log` gets the end lines without it). Writes
+    OUT/report.json and report.md."""
+    log = log or (lambda msg: None)
+    if quick:
+        runs, left = quick_plan(solvers, levels, only, grammar, budget)
+    else:
+        runs, left = plan(long, solvers, levels or LEVELS, only, grammar), []
+    log(plan_summary(runs, left, quick, budget, engine))
+    if progress is None:
+        def progress(event, k, n, label, text):
+            if event == "end":
+                log(f"case {k}/{n} {label}: {text}")
+    results = []
+    # estimates of a tree the table has not measured can be low several
+    # times over (the same blast sends one tree to the reference and leaves
+    # another in the linear tier): a quick run that would end past twice
+    # the budget (the 5 minutes) is skipped, not run
+    limit, spent = (QUICK_LIMIT * budget / QUICK_BUDGET if quick else math.inf), 0.0
+    for k, r in enumerate(runs, 1):
+        if spent + (0.0 if math.isnan(r.estimate) else r.estimate) > limit:
+            progress("end", k, len(runs), r.label,
+                     f"skipped, {spent:.0f} CPU s spent of {limit:.0f} (the estimates were low)")
+            continue
+        about = "not estimated" if math.isnan(r.estimate) else f"about {r.estimate:.0f} CPU s"
+        progress("start", k, len(runs), r.label, f"running, {about}")
+        res = run(r.case, r.solver, r.level, engine)
+        spent += res.cpu
+        progress("end", k, len(runs), r.label, outcome(res))
+        results.append(res)
     out = Path(out)
     write_text(out / "report.json", json.dumps([asdict(r) for r in results], indent=2,
                                                default=str) + "\n")
     write_text(out / "report.md", report_markdown(results))
     return results
+
+
+def outcome(r: Result) -> str:
+    """A run's result in a progress line: `passed, 2.1 s (CPU 0.6 s; ...)`."""
+    text = (f"{'passed' if r.passed else 'FAILED'}, {r.seconds:.1f} s (CPU {r.cpu:.1f} s; "
+            f"growth {r.energy_growth:.3g}, gain {r.gain:.3g}, gap {r.gap:.3g}, "
+            f"spin {r.spin:.3g})")
+    return text + (f": {r.error}" if r.error else "")
+
+
+def plan_summary(runs: list[Run], left: list[Run], quick: bool, budget: float,
+                 engine: str = "auto") -> str:
+    """What a plan will run and cost, and what it leaves out, said before it
+    runs: `quick: 26 runs of 16 cases, about 117 s of CPU (budget 135 s)`."""
+    total = sum(r.estimate for r in runs if not math.isnan(r.estimate))
+    unknown = sum(1 for r in runs if math.isnan(r.estimate))
+    n, cases_ = len(runs), len({r.case.name for r in runs})
+    line = (f"{'quick: ' if quick else ''}{n} run{'s' * (n != 1)} of {cases_} "
+            f"case{'s' * (cases_ != 1)}, about {_duration(total)} of CPU")
+    if unknown:
+        line += f" and {unknown} runs not estimated"
+    if quick:
+        line += f" (budget {_duration(budget)})"
+    if engine != "auto":
+        line += f"; estimated for --engine auto, not {engine}"
+    if left:
+        line += ("\nleft out, over the budget: "
+                 + "; ".join(f"{r.label} (about {_duration(r.estimate)})" for r in left))
+    return line
+
+
+def _duration(seconds: float) -> str:
+    """`45 s`, `135 s`, `29.8 min`, `1.3 h`."""
+    if math.isnan(seconds):
+        return "unknown"
+    if seconds < 600:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.1f} min" if seconds < 6000 else f"{seconds / 3600:.1f} h"
