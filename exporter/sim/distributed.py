@@ -60,6 +60,7 @@ def check_versions(client) -> int:
 def run_chunks(address: str, calls: list[tuple], progress=None, log=None) -> list:
     """simulate_chunk(*args) for each of `calls` as tasks on the cluster at
     `address`, results in order; `progress.chunk_done(k)` as each comes."""
+    from .lod import results_in_order
     from .scheduler import simulate_chunk
 
     client = connect(address)
@@ -72,12 +73,7 @@ def run_chunks(address: str, calls: list[tuple], progress=None, log=None) -> lis
                                  key=f"treebake-chunk-{run}-{k}")
                    for k, args in enumerate(calls)]
         try:
-            results = []
-            for k, fut in enumerate(futures):
-                results.append(fut.result())
-                if progress is not None:
-                    progress.chunk_done(k)
-            return results
+            return results_in_order(futures, progress)
         except BaseException:
             client.cancel(futures)
             raise

@@ -84,11 +84,17 @@ def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkRe
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         futures = [pool.submit(simulate_chunk, [trees[i] for i in members], scene, q, loads)
                    for q, members in plan]
-        results = []
-        for k, fut in enumerate(futures):
-            results.append(fut.result())
-            if progress is not None:
-                progress.chunk_done(k)
+        return results_in_order(futures, progress)
+
+
+def results_in_order(futures, progress=None) -> list[ChunkResult]:
+    """The chunks' results in plan order (local or Dask futures alike),
+    `progress.chunk_done(k)` as each comes."""
+    results = []
+    for k, fut in enumerate(futures):
+        results.append(fut.result())
+        if progress is not None:
+            progress.chunk_done(k)
     return results
 
 
