@@ -60,7 +60,6 @@ def job_name(name: str) -> str:
 def cmd_bake(args) -> int:
     import os
 
-    from .bake import save_bake
     from .export import check_options
     from .fileio import job_lock
     from .pipeline import bake_scene
@@ -98,10 +97,10 @@ def cmd_bake(args) -> int:
         opts = export_options(args, allow_none=True)
         check_options(opts)
     with job_lock(out):  # proves the folder writable; one run per job folder at a time
+        path = out / f"{out.name}.npz"
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
                           workers=workers, timestep=timestep, budget=budget,
-                          scheduler=args.scheduler)
-        path = save_bake(bake, out / f"{out.name}.npz")
+                          scheduler=args.scheduler, path=path)
         exported = None
         if opts is not None and opts.formats:
             exported = run_export(bake, path, args.out, out.name, opts, args)
@@ -214,7 +213,7 @@ def print_export(report) -> None:
 
 
 def cmd_export(args) -> int:
-    from .bake import load_bake
+    from .bake_file import load_bake
     from .export import check_options
     from .fileio import job_lock
 
@@ -235,7 +234,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_preview(args) -> int:
-    from .bake import load_bake
+    from .bake_file import load_bake
     from .export import write_previews
 
     path = Path(args.bake)

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__
-from .bake import FAST_TURN_DEG, Bake, check_finite
+from .bake import FAST_TURN_DEG, Bake
+from .bake_file import check_finite
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh

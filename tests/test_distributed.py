@@ -6,7 +6,7 @@ import os
 import signal
 
 import pytest
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.cli import main
 from treebake.grow import grow
 from treebake.pipeline import bake_scene
