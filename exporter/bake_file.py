@@ -159,6 +159,22 @@ class StoredTrees(Sequence[TreeBake]):
         for i in range(self._count):
             yield self[i]
 
+    def field(self, i: int, key: str) -> np.ndarray:
+        """One array of tree i (`leaf`, `width`, ...), reading nothing else."""
+        try:
+            return self._archive[f"tree{i}.{key}"]
+        except _DAMAGE as exc:
+            raise InputError(f"{self._path}: not a readable treebake bake: damaged or "
+                             f"truncated ({type(exc).__name__}: {exc})") from None
+
+
+def tree_field(trees: Sequence[TreeBake], i: int, key: str) -> np.ndarray:
+    """One array of tree i of a bake's trees, in memory or stored (then
+    only that array is read)."""
+    if isinstance(trees, StoredTrees):
+        return trees.field(i, key)
+    return getattr(trees[i], key)
+
 
 def _read_tree(z, i: int, times: np.ndarray, path: Path) -> TreeBake:
     pre = f"tree{i}."

@@ -145,7 +145,8 @@ def export_options(args, allow_none: bool = False):
                              angle_tolerance=math.radians(args.angle_tolerance),
                              enabled=not args.no_reduce),
         split=args.split, obj_stride=args.stride, preview_size=args.size,
-        frame_start=args.frame_start, textures=not args.no_textures)
+        frame_start=args.frame_start, textures=not args.no_textures,
+        trees_per_file=args.trees_per_file, usd_layers=args.usd_layers)
 
 
 def run_export(bake, bake_path, out, name, opts, args):
