@@ -93,7 +93,6 @@ def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_pa
     import json
 
     import blender
-
     from treebake.exchange.mesh import pose
     from treebake.export import build_meshes
 
