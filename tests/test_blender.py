@@ -81,8 +81,11 @@ def test_blender_renders_the_leaf_cards_cut_out_by_their_alpha(tmp_path):
     assert 0.15 * green["plain"] < green["tex"] < 0.75 * green["plain"], green
 
 
-def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_path):
-    """The demo's .abc imported into Blender (File > Import > Alembic, the
+@pytest.mark.parametrize("duration", [None, pytest.param(8.0, marks=pytest.mark.slow)],
+                         ids=["demo-1s", "demo-8s"])
+def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_path, duration):
+    """The demo's .abc (the tests' 1 s bake; -m slow: the whole 8 s scene)
+    imported into Blender (File > Import > Alembic, the
     scene at the bake's frame rate first): every segment is an empty named
     like the glTF joint, parented like the segments, whose world matrix on
     every frame number N is the bake's frame N - 1 within 1 mm (base and
@@ -97,7 +100,7 @@ def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_pa
     from treebake.export import build_meshes
 
     pytest.importorskip("alembic3d", reason="alembic3d (treebake[alembic]) writes the .abc")
-    bake = preset_bake("demo")
+    bake = preset_bake("demo", duration)
     n = len(bake.times)
     export_bake(bake, tmp_path, "demo", ExportOptions(formats=("abc",)))
     mesh_frames = [1, n // 2, n]
