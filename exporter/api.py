@@ -62,8 +62,8 @@ def load_bake(path: str | Path):
 def export_bake(bake, out: str | Path = "out", formats=("glb",), name: str | None = None,
                 textures: bool = True, **options):
     """Write `bake` into `out/<name>/` (name: the scene's) in `formats`
-    (any of glb, gltf, obj, usd, usda, preview; usd needs `treebake[usd]`),
-    with manifest.json. `textures=False` writes plain colour materials.
+    (any of glb, gltf, obj, usd, usda, abc, preview; usd needs `treebake[usd]`,
+    abc `treebake[alembic]`), with manifest.json. `textures=False` writes plain colour materials.
     Other options are ExportOptions fields (split, obj_stride,
     preview_size). Returns the ExportReport (folder, manifest, files)."""
     from .export import ExportOptions, parse_formats

@@ -111,10 +111,11 @@ def _job(file: str, base: Path, raw: dict, key: str, defaults: dict) -> list[Job
     formats = data.get("formats", ["glb"])
     if isinstance(formats, str):
         formats = [formats]
-    from .export import parse_formats
+    from .export import check_extras, parse_formats
 
     try:
         formats = parse_formats(formats)
+        check_extras(formats)  # a missing extra: now, not after the job's simulation
     except InputError as exc:
         raise _fail(file, f"{key}.formats", str(exc)) from None
     solver = data.get("solver", "planar")

@@ -189,18 +189,20 @@ COMMANDS: tuple[Command, ...] = (
                   "as soon as it is derived)"),
          json_option("print the summary as JSON"),
          opt("-q", "--quiet", action="store_true", help="no progress or notes on stderr"),
-         opt("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, preview "
-                              "(default: the scene's `formats`, else only the .npz bake)"),
+         opt("--format", help="also export: comma-separated glb, gltf, obj, usd, usda, abc, "
+                              "preview (default: the scene's `formats`, else only the .npz "
+                              "bake)"),
          STRICT),
         defaults=EXPORT_DEFAULTS),
     Command(
-        "export", cmd_export, "export a bake to glTF, OBJ sequences, USD, previews",
+        "export", cmd_export, "export a bake to glTF, OBJ sequences, USD, Alembic, previews",
         "Write a bake (.npz) as animated glTF 2.0 (.glb or .gltf+.bin), OBJ sequences, USD "
-        "(needs usd-core) and previews into OUT/<name>/, with manifest.json "
+        "(needs usd-core), Alembic (needs treebake[alembic]) and previews into OUT/<name>/, "
+        "with manifest.json "
         "(docs/formats.md).",
         (opt("bake", help="bake file (.npz) from `treebake bake`"),
          opt("--format", default="glb",
-             help="comma-separated: glb, gltf, obj, usd, usda, preview (default: glb)"),
+             help="comma-separated: glb, gltf, obj, usd, usda, abc, preview (default: glb)"),
          OUT, JOB_NAME, EXPORT_OPTIONS, json_option("print the summary as JSON"), QUIET)),
     Command(
         "preview", cmd_preview, "contact sheet PNG and animated GIF of a bake",

@@ -1,4 +1,4 @@
-"""Export a Bake to files: glTF (.glb / .gltf), OBJ sequences, USD, previews,
+"""Export a Bake to files: glTF (.glb / .gltf), OBJ sequences, USD, Alembic, previews,
 into `out/<job>/` with a `manifest.json` (inputs, hashes, settings, files,
 frame range, sizes, keyframe reduction). The CLI's `export` and
 `bake --format` call `export_bake`. docs/formats.md describes every file.
@@ -21,7 +21,7 @@ from .exchange.anim import ReduceOptions
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, part_materials_of, tree_mesh
 from .fileio import atomic_path, write_bytes, write_text
 
-FORMATS = ("glb", "gltf", "obj", "usd", "usda", "preview")
+FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
 MAX_FRAME_START = 1_000_000
 ALIASES = {"npz": None}  # the bake itself: always written by `treebake bake`
 
@@ -107,6 +107,17 @@ def check_options(opts: ExportOptions) -> None:
     if opts.frame_start is not None and not 0 <= opts.frame_start <= MAX_FRAME_START:
         raise InputError(f"--frame-start must be in 0..{MAX_FRAME_START}, got "
                          f"{opts.frame_start}")
+    check_extras(opts.formats)
+
+
+def check_extras(formats: tuple[str, ...]) -> None:
+    """InputError (exit 2) naming the extra to install when a format needs
+    an optional package that is missing: checked with the options, before
+    any simulation."""
+    if "abc" in formats:
+        from .exchange.abc import require
+
+        require()
 
 
 def sha256(path: Path) -> str:
@@ -281,6 +292,7 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     files += _write_gltf(job, manifest)
     files += _write_obj(job, manifest)
     files += _write_usd(job, manifest)
+    files += _write_abc(job, manifest)
     if "preview" in opts.formats:
         files += write_previews(bake, folder, name, opts.preview_size,
                                 progress=lambda d, t: tick("preview", d, t))
@@ -387,6 +399,23 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
                                "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0,
                                "layers": layers, "tree_layers_validated": res.layers_checked}
     return files
+
+
+def _write_abc(job: _Job, manifest: dict) -> list[Path]:
+    """The Alembic archive; its time sampling and contents go into the manifest."""
+    if "abc" not in job.opts.formats:
+        return []
+    from .exchange.abc import export_abc, library_version
+
+    res = export_abc(job.bake, job.meshes, job.folder, job.name, frame_start=job.first,
+                     progress=lambda d, t: job.tick("abc", d, t))
+    n = len(job.bake.times)
+    manifest["alembic"] = {"frames": [job.first, job.first + n - 1], "start_s": res.start_s,
+                           "frame_s": res.step_s, "end_s": (job.first + n - 1) / job.bake.fps,
+                           "xforms": res.xforms, "meshes": res.meshes,
+                           "point_caches": res.point_caches, "up_axis": "Y",
+                           "units": "m", "winding": "clockwise", "library": library_version()}
+    return res.files
 
 
 def write_previews(bake: Bake, folder: Path, name: str, size: int = 256,

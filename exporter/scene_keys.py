@@ -16,7 +16,7 @@ BEAUFORT = {  # m/s, lower bounds (WMO)
     "moderate breeze": 5.5, "fresh breeze": 8.0, "strong breeze": 10.8, "near gale": 13.9,
     "gale": 17.2, "strong gale": 20.8, "storm": 24.5, "violent storm": 28.5, "hurricane": 32.7,
 }
-FORMATS = ("glb", "gltf", "obj", "usd", "usda", "preview", "npz")
+FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview", "npz")
 LEVELS = tuple(QUALITIES)
 SEED_MAX = 2**63 - 1
 MAX_TREES = 5000

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
@@ -78,3 +79,108 @@ def test_blender_renders_the_leaf_cards_cut_out_by_their_alpha(tmp_path):
         green[name] = int(((g > r + 12) & (g > b + 12)).sum())
         assert not ((r > 200) & (g < 80) & (b > 200)).any()  # Blender's missing texture
     assert 0.15 * green["plain"] < green["tex"] < 0.75 * green["plain"], green
+
+
+@pytest.mark.parametrize("duration", [None, pytest.param(8.0, marks=pytest.mark.slow)],
+                         ids=["demo-1s", "demo-8s"])
+def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_path, duration):
+    """The demo's .abc (the tests' 1 s bake; -m slow: the whole 8 s scene)
+    imported into Blender (File > Import > Alembic, the
+    scene at the bake's frame rate first): every segment is an empty named
+    like the glTF joint, parented like the segments, whose world matrix on
+    every frame number N is the bake's frame N - 1 within 1 mm (base and
+    tip); each tree's mesh is one object `<tree>_mesh` whose vertices are
+    the posed mesh within 1 mm, wound so Blender's face normals point out,
+    with material slots named by material; the import sets the scene's
+    frame range to 1..F (docs/formats.md)."""
+    import json
+
+    import blender
+    from treebake.exchange.mesh import pose
+    from treebake.export import build_meshes
+
+    pytest.importorskip("alembic3d", reason="alembic3d (treebake[alembic]) writes the .abc")
+    bake = preset_bake("demo", duration)
+    n = len(bake.times)
+    export_bake(bake, tmp_path, "demo", ExportOptions(formats=("abc",)))
+    mesh_frames = [1, n // 2, n]
+    out = tmp_path / "blender_abc.npz"
+    blender.run("blender_abc.py", str(tmp_path / "demo" / "demo.abc"), str(out),
+                str(int(bake.fps)), *map(str, range(1, n + 1)),
+                "--mesh-frames", ",".join(map(str, mesh_frames)))
+    got = np.load(out)
+    info = json.loads(str(got["info"]))
+    index = {name: j for j, name in enumerate(info["names"])}
+    assert info["scene_range"] == [1, n]  # "Set Frame Range": frame_start..frame_start + F - 1
+    assert info["frames"] == list(range(1, n + 1))
+    world = got["world"]  # (frames, objects, 4, 4), Z up
+    worst = {"base": 0.0, "tip": 0.0, "mesh": 0.0}
+    step = 0.0
+    meshes, _ = build_meshes(bake, ExportOptions().mesh)
+    for tree, mesh in zip(bake.trees, meshes):
+        names = joint_names(tree.name, tree.paths)
+        assert info["types"][index[tree.name]] == "EMPTY"
+        rows = np.array([index[name] for name in names])
+        for s, name in enumerate(names):
+            p = int(tree.seg_parent[s])
+            assert info["types"][rows[s]] == "EMPTY"
+            assert info["parents"][rows[s]] == (tree.name if p < 0 else names[p])
+        m = world[:, rows]  # (n, S, 4, 4)
+        want = tree.positions.astype(np.float64)  # frame N is the bake's frame N - 1
+        vec = tree.points[tree.seg_end] - tree.points[tree.seg_start]
+        q = tree.rotations.astype(np.float64)
+        u, w = q[..., :3], q[..., 3:]
+        t = 2.0 * np.cross(u, vec)
+        tip_want = want + vec + w * t + np.cross(u, t)
+        tip = m[..., :3, 3] + np.einsum("fsij,sj->fsi", m[..., :3, :3], vec)
+        worst["base"] = max(worst["base"], float(np.linalg.norm(m[..., :3, 3] - want, axis=-1)
+                                                 .max()))
+        worst["tip"] = max(worst["tip"], float(np.linalg.norm(tip - tip_want, axis=-1).max()))
+        step = max(step, float(np.abs(np.diff(want, axis=0)).max()))
+        obj = f"{tree.name}_mesh"
+        assert info["types"][index[obj]] == "MESH"
+        assert info["data"][index[obj]] == f"{tree.name}_geo"
+        assert info["materials"][obj] == [part.material for part in mesh.parts if len(part.faces)]
+        assert info["modifiers"][obj] == ["MESH_SEQUENCE_CACHE"]  # the point cache
+        for k in mesh_frames:
+            co = got[f"co/{k}/{obj}"]
+            posed, normals = pose(mesh, tree, k - 1)
+            assert co.shape == posed.shape
+            worst["mesh"] = max(worst["mesh"], float(np.abs(co - posed).max()))
+            tri, face_n = got[f"tri/{k}/{obj}"], got[f"normal/{k}/{obj}"]
+            np.testing.assert_array_equal(np.sort(tri, axis=1), np.sort(mesh.faces(), axis=1))
+            bark = np.arange(len(mesh.parts[0].faces))
+            assert mesh.parts[0].material == "bark"
+            outward = normals[tri[bark]].sum(axis=1)
+            assert ((face_n[bark] * outward).sum(-1) > 0).mean() > 0.99
+    assert step > 5e-3  # the bake moves between frames: an offset by one would show
+    print(f"Blender {info['blender']}: worst segment base {worst['base'] * 1e3:.4f} mm, tip "
+          f"{worst['tip'] * 1e3:.4f} mm, mesh vertex {worst['mesh'] * 1e3:.4f} mm over {n} "
+          f"frames; neighbouring frames differ by up to {step * 1e3:.0f} mm")
+    assert worst["base"] < 1e-3 and worst["tip"] < 1e-3 and worst["mesh"] < 1e-3, worst
+
+
+def test_blender_renders_the_abc_like_the_glb(tmp_path):
+    """Workbench renders of one frame of the demo, imported once as the .abc
+    (point caches, face-set materials given docs/formats.md's colours by
+    tests/tools/blender_render.py) and once as the plain-colour glb
+    (skinned): the same picture, pixel for pixel but for a few edge pixels
+    (the mesh, its normals, its materials, its place and its frame)."""
+    import blender
+    from PIL import Image
+
+    pytest.importorskip("alembic3d", reason="alembic3d (treebake[alembic]) writes the .abc")
+    bake = preset_bake("demo")
+    export_bake(bake, tmp_path, "demo", ExportOptions(formats=("abc", "glb"), textures=False))
+    images = {}
+    for ext in ("abc", "glb"):
+        png = tmp_path / f"{ext}.png"
+        blender.run("blender_render.py", str(tmp_path / "demo" / f"demo.{ext}"), str(png), "20",
+                    "--size", "480x270", "--fps", str(int(bake.fps)))
+        images[ext] = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    rgb = images["abc"]
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    assert ((g > r + 12) & (g > b + 12)).mean() > 0.05  # leaves: green, not default grey
+    differ = (np.abs(images["abc"] - images["glb"]).max(axis=-1) > 10).mean()
+    print(f"abc vs glb render: {100 * differ:.3f} % of pixels differ by more than 10 levels")
+    assert differ < 0.01, differ

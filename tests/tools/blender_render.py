@@ -1,14 +1,20 @@
 """Run inside Blender's Python (the `bpy` module, tests/tools/blender.py):
-import a treebake glb and render one frame headless, the way a user would
-look at it: a camera framing the trees from the front (-Y, slightly above),
-a sun, a sky-coloured world and a ground plane.
+import a treebake glb (or Alembic .abc) and render one frame headless, the
+way a user would look at it: a camera framing the trees from the front (-Y,
+slightly above), a sun, a sky-coloured world and a ground plane.
 
-    python blender_render.py FILE.glb OUT.png FRAME [--engine workbench|eevee|cycles]
+    python blender_render.py FILE.glb|FILE.abc OUT.png FRAME [--engine workbench|eevee|cycles]
         [--size 960x540] [--samples 16] [--distance 1.0] [--target X,Y,Z --from X,Y,Z]
+        [--fps 24]
 
 Workbench shows textures (colour type TEXTURE) but not their alpha (leaf
 cards draw as squares); EEVEE and Cycles use the imported materials as they
 are, cutout cards included. Without a GPU, Cycles (CPU) is the quick one.
+An Alembic archive has no materials, only face sets that Blender makes
+into empty materials of their names (`bark`, `leaf`, ...): they get the
+plain colours of docs/formats.md here, and Workbench shows them (colour
+type MATERIAL). `--fps`: the scene's frame rate, set before an Alembic
+import (docs/formats.md; default 24).
 """
 
 import math
@@ -23,13 +29,34 @@ def _arg(name, default):
     return argv[argv.index(name) + 1] if name in argv else default
 
 
+# docs/formats.md's plain material colours (linear RGB), for Alembic imports
+COLOURS = {"bark": (0.36, 0.25, 0.16), "leaf": (0.22, 0.48, 0.16), "leaf2": (0.14, 0.34, 0.12),
+           "leaf3": (0.55, 0.55, 0.16), "leaf4": (0.62, 0.30, 0.10), "object": (0.55, 0.45, 0.35)}
+
+
+def _import_abc(path: str) -> None:
+    scene = bpy.context.scene
+    scene.render.fps, scene.render.fps_base = int(_arg("--fps", "24")), 1.0
+    options = bpy.ops.wm.alembic_import.get_rna_type().properties.keys()
+    kw = {"as_background_job": False} if "as_background_job" in options else {}
+    bpy.ops.wm.alembic_import(filepath=path, **kw)
+    for mat in bpy.data.materials:
+        rgb = COLOURS.get(mat.name.split(".")[0])
+        if rgb is not None:
+            mat.diffuse_color = (*rgb, 1.0)  # what Workbench shows
+
+
 def main() -> None:
     args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     glb, out, frame = args[0], args[1], int(args[2])
     engine = _arg("--engine", "workbench")
     w, h = (int(v) for v in _arg("--size", "960x540").split("x"))
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.import_scene.gltf(filepath=glb)
+    alembic = glb.lower().endswith(".abc")
+    if alembic:
+        _import_abc(glb)
+    else:
+        bpy.ops.import_scene.gltf(filepath=glb)
     scene = bpy.context.scene
     scene.frame_set(frame)
     lo, hi = Vector((1e9, 1e9, 1e9)), Vector((-1e9, -1e9, -1e9))
@@ -79,7 +106,7 @@ def main() -> None:
         scene.render.engine = "BLENDER_WORKBENCH"
         shading = scene.display.shading
         shading.light = "STUDIO"
-        shading.color_type = "TEXTURE"
+        shading.color_type = "MATERIAL" if alembic else "TEXTURE"
         shading.show_shadows = True
         shading.background_type = "WORLD"
     elif engine == "eevee":
