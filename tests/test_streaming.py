@@ -131,3 +131,72 @@ def test_a_damaged_tree_in_a_lazy_bake_is_named_when_read(streamed, tmp_path):
         lazy.trees[40]
     with pytest.raises(InputError, match="damaged or truncated"):
         load_bake(bad)  # read whole: refused at once
+
+
+def world_joints(path, load=True, times=(1, 7, 12)):
+    """Every skeleton's joint world transforms at `times` (USD time codes),
+    by skeleton prim path, from a stage opened with payloads loaded or not."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll if load else Usd.Stage.LoadNone)
+    cache, out = UsdSkel.Cache(), {}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdSkel.Root):
+            root = UsdSkel.Root(prim)
+            cache.Populate(root, Usd.PrimDefaultPredicate)
+            for b in cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate):
+                q = cache.GetSkelQuery(b.GetSkeleton())
+                out[str(prim.GetPath())] = np.array([
+                    np.array(q.ComputeJointWorldTransforms(UsdGeom.XformCache(Usd.TimeCode(t))))
+                    for t in times])
+    return out, stage
+
+
+def test_a_usd_of_many_trees_is_a_root_stage_of_payloads_with_the_same_motion(
+        streamed, tmp_path, monkeypatch):
+    pytest.importorskip("pxr")  # TREEBAKE_REQUIRE_TOOLS: see conftest
+    from treebake import export
+    from treebake.export import ExportOptions, export_bake
+
+    monkeypatch.setattr(export, "USD_LAYER_TREES", 50)  # "auto" past 50 trees here
+
+    path, _, _ = streamed
+    bake = load_bake(path, lazy=True)
+    one = export_bake(bake, tmp_path, "one", ExportOptions(formats=("usd",), usd_layers="one"))
+    layered = export_bake(bake, tmp_path, "many", ExportOptions(formats=("usd",)))  # auto
+    assert one.manifest["usd"]["layers"] == "one"
+    assert layered.manifest["usd"]["layers"] == "tree"
+    assert layered.manifest["usd"]["tree_layers_validated"] == 20
+    layers = sorted((tmp_path / "many" / "many.trees").iterdir())
+    assert len(layers) == len(bake.trees)
+    unloaded, stage = world_joints(tmp_path / "many" / "many.usd", load=False)
+    assert unloaded == {}  # opened with nothing loaded: no skeleton read
+    assert len([p for p in stage.TraverseAll() if p.HasPayload()]) == len(bake.trees)
+    whole, _ = world_joints(tmp_path / "one" / "one.usd")
+    loaded, _ = world_joints(tmp_path / "many" / "many.usd")
+    assert len(whole) == sum(not t.static for t in bake.trees) > 50
+    assert {k.replace("/many/", "/one/") for k in loaded} == set(whole)
+    for key, value in loaded.items():
+        np.testing.assert_allclose(value, whole[key.replace("/many/", "/one/")], atol=1e-6)
+
+
+def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(streamed, tmp_path):
+    from treebake.exchange.gltf_read import read_gltf_bake
+    from treebake.export import ExportOptions, export_bake
+
+    path, _, _ = streamed
+    bake = load_bake(path)
+    rep = export_bake(bake, tmp_path, "f", ExportOptions(formats=("glb",), trees_per_file=40))
+    parts = sorted((tmp_path / "f").glob("f.part*.glb"))
+    assert [p.name for p in parts] == ["f.part0001.glb", "f.part0002.glb", "f.part0003.glb"]
+    assert not (tmp_path / "f" / "f.glb").exists()
+    seen = {}
+    for p in parts:
+        for t in read_gltf_bake(p).trees:
+            assert t.name not in seen
+            seen[t.name] = t
+    moving = {t.name: t for t in bake.trees if not t.static}
+    assert set(moving) <= set(seen) and len(seen) == len(bake.trees)
+    for name, t in moving.items():  # within the keyframe reduction's tolerance
+        assert np.abs(seen[name].positions - t.positions).max() < 0.004
+    assert rep.manifest["settings"]["trees_per_file"] == 40

@@ -71,7 +71,8 @@ class _Writer:
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
         self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
         self.bake = bake
-        self.stage = Usd.Stage.CreateInMemory()
+        # payloads (tree layers) are not loaded while the stage is written
+        self.stage = Usd.Stage.CreateInMemory(load=Usd.Stage.LoadNone)
         st = self.stage
         UsdGeom.SetStageUpAxis(st, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(st, 1.0)
