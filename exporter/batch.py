@@ -175,7 +175,8 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
                     progress(name, done, total)
             bake_path = folder / f"{job.name}.npz"
             bake = bake_scene(scene, solver=job.solver, progress=tick,
-                              budget=Budget(folder=folder), path=bake_path)
+                              budget=Budget(folder=folder), path=bake_path,
+                              scheduler=job.scheduler)
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]
             if exports:
