@@ -60,6 +60,7 @@ def job_name(name: str) -> str:
 def cmd_bake(args) -> int:
     import os
 
+    from .bake_file import tree_field
     from .export import check_options
     from .fileio import job_lock
     from .pipeline import bake_scene
@@ -105,9 +106,13 @@ def cmd_bake(args) -> int:
         if opts is not None and opts.formats:
             exported = run_export(bake, path, args.out, out.name, opts, args)
     t = bake.timing
+    # from each tree's smallest entries: the bake is not read again
+    sizes = [(len(tree_field(bake.trees, i, "seg_start")),
+              "static" in tree_field(bake.trees, i, "info_dict"))
+             for i in range(len(bake.trees))]
     summary = {"bake": str(path), "trees": len(bake.trees),
-               "simulated": sum(1 for tb in bake.trees if not tb.static),
-               "segments": sum(tb.n_segments for tb in bake.trees),
+               "simulated": sum(1 for _, static in sizes if not static),
+               "segments": sum(n for n, _ in sizes),
                "frames": len(bake.times), "notes": bake.meta.get("notes", []),
                "wall_seconds": t.get("wall_seconds")}
     if exported is not None:
@@ -223,7 +228,7 @@ def cmd_export(args) -> int:
         raise InputError(f"{path}: bake file not found")
     opts = export_options(args)
     check_options(opts)
-    bake = load_bake(path)
+    bake = load_bake(path, lazy=True)  # the writers read a tree at a time
     name = job_name(args.name or str(bake.meta.get("scene") or "bake"))
     with job_lock(Path(args.out) / name):
         report = run_export(bake, path, args.out, name, opts, args)
