@@ -106,9 +106,11 @@ class PlanarLOD:
         result then keeps none."""
         plan = chunks(self.trees, self.qualities, whole=bool(self.scene.projectiles))
         results = []
-        for (_, members), res in zip(plan, simulate(self.trees, plan, self.scene, self.loads,
-                                                    self.workers, self.log, progress,
-                                                    self.scheduler)):
+        # the generator runs to its end (not zip's: it would stop one short of
+        # the pool's shutdown and the progress's last word)
+        for k, res in enumerate(simulate(self.trees, plan, self.scene, self.loads, self.workers,
+                                         self.log, progress, self.scheduler)):
+            members = plan[k][1]
             if on_tree is not None:
                 for i, motion, spans in zip(members, res.motions, res.spans):
                     on_tree(i, motion, spans_text(spans))
