@@ -200,6 +200,22 @@ def test_a_keyed_vortex_follows_its_path_strength_and_radius(root):
     assert loads.quiet_after(np.array([0.0, 45.0 + reach + 10.0, 0.0]), 3.0, 10.0) == 0
 
 
+def test_culling_follows_a_keyed_path_round_its_bend(root):
+    """A small vortex (reach 10 m/s x 5 m / 0.5 m/s = 100 m) along a path that
+    bends 200 m off the straight line between its first and last keys: the
+    tree under the bend is reached, one 130 m beyond it is not."""
+    raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 8.0,
+           "vortex": [{"path": [{"time": 0.0, "value": [-300.0, 0.0]},
+                                {"time": 4.0, "value": [0.0, 200.0]},
+                                {"time": 8.0, "value": [300.0, 0.0]}],
+                       "max_speed": 10.0, "core_radius": 5.0}]}
+    for how in ("linear", "smooth"):
+        raw["vortex"][0]["path_interpolation"] = how
+        loads = SceneLoads(parse_scene(raw, file="<v>"))
+        assert loads.quiet_after(np.array([0.0, 200.0, 0.0]), 3.0, 10.0) == 8.0, how
+        assert loads.quiet_after(np.array([0.0, 330.0, 0.0]), 3.0, 10.0) == 0.0, how
+
+
 def test_a_keyed_attractor_pulls_toward_its_keyed_position(root):
     raw = {"tree": [{"grammar": str(root / "grammars" / "sapling.lsys")}], "duration": 6.0,
            "attractor": [{"position": [{"time": 0.0, "value": [0.0, 0.0, 5.0]},
