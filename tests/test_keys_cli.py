@@ -147,3 +147,18 @@ def test_overrides_cut_the_keys_or_replace_them(tmp_path):
     # --wind is one speed for the whole shot: the keys and their interpolation go
     steady = load_scene(path, {"wind.speed": 7.0})
     assert steady.wind.speed == 7.0
+
+
+def test_the_docs_example_of_keys_is_a_valid_scene(root):
+    import re
+    import tomllib
+
+    from treebake.scene import parse_scene
+
+    text = (root / "docs" / "scenes.md").read_text(encoding="utf-8")
+    section = text.split("## Keys", 1)[1].split("\n## ", 1)[0]
+    example = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+    raw = {**tomllib.loads(example), "duration": 12.0, "tree": [{"grammar": "sapling"}]}
+    s = parse_scene(raw, file="docs/scenes.md")
+    assert s.wind.speed.interpolation == "smooth" and s.vortices[0].path.at(3.0).tolist() == \
+        [-40.0, -15.0]
