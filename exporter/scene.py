@@ -61,9 +61,7 @@ class TreeSpec:
     quality: str | None = TREE["quality"].default  # per-tree override (e.g. far trees)
 
 
-# A keyed key's value: a plain value, or a keys.Keyed curve through its keys.
-
-
+# A keyed key's field holds a plain value, or a keys.Keyed curve through its keys.
 @dataclass
 class WindSpec:
     speed: float | Keyed  # m/s at reference height
@@ -193,7 +191,6 @@ KEYS_FORM = "[{time = ..., value = ...}, ...]"
 def is_keys(value: Any) -> bool:
     """Whether a scene value is a list of keys (tables), not a plain value."""
     return isinstance(value, list) and any(isinstance(x, dict) for x in value)
-
 
 
 class _Reader:
