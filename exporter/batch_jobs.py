@@ -240,7 +240,7 @@ class JobResult:
 
 def scene_of(job: Job):
     """The Scene a job bakes (validated, overrides applied)."""
-    from .scene import load_scene, parse_scene
+    from .scene import key_horizon, load_scene, parse_scene, with_wind_speed
 
     overrides = {k: v for k, v in (("duration", job.duration), ("fps", job.fps),
                                    ("quality", job.quality), ("wind.speed", job.wind))
@@ -262,8 +262,8 @@ def scene_of(job: Job):
         base = Path(job.grammar).parent
     raw["name"] = job.name
     if "wind.speed" in overrides:
-        raw["wind"] = {**raw.get("wind", {}), "speed": overrides.pop("wind.speed")}
-        raw["wind"].pop("beaufort", None)
+        raw["wind"] = with_wind_speed(raw.get("wind", {}), overrides.pop("wind.speed"))
+    horizon = key_horizon(raw, overrides)
     raw.update(overrides)
     return parse_scene(raw, file=job.scene or job.grammar, base=base,
-                       source_hash=job.inputs_digest())
+                       source_hash=job.inputs_digest(), horizon=horizon)

@@ -20,6 +20,12 @@ Sources of the models and constants: docs/physics-sources.md.
 - Vortex: a moving combined Rankine vortex with radial inflow and updraft; it
   adds to the wind and loads trees through the same drag law.
 - Attractor: an acceleration field toward a point, 1/r^2 outside a core.
+
+Parameters a director animates (the wind's speed, heading and turbulence;
+a vortex's path, strength and radius; an attractor's position and
+strength) are a plain value or a keys.Keyed curve, evaluated at the time
+each force is asked for: every engine asks here (sim/loads.py), so every
+engine sees the keyed value at its own times.
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from .keys import Keyed, largest, value_at
 
 AIR_DENSITY = 1.2  # kg/m^3
 SOUND_SPEED = 340.0  # m/s
@@ -66,58 +74,128 @@ def synthesize(rng: np.random.Generator, count: int, dt: float, sigma: float, le
 @dataclass
 class Wind:
     """Mean wind `speed` (m/s) at `reference_height` (m) blowing toward
-    `direction` (unit horizontal vector), power-law `shear` exponent, and
-    turbulence of intensity `turbulence` (sigma_u / U) with longitudinal
-    length scale `length_scale` (m); sigma_v = 0.8 sigma_u, sigma_w =
-    0.5 sigma_u, L_v = L_u / 3, L_w = L_u / 12 (IEC 61400-1 ratios)."""
+    `direction` (unit horizontal vector, or a Keyed heading in degrees
+    counter-clockwise from +X), power-law `shear` exponent, and turbulence
+    of intensity `turbulence` (sigma_u / U) with longitudinal length scale
+    `length_scale` (m); sigma_v = 0.8 sigma_u, sigma_w = 0.5 sigma_u,
+    L_v = L_u / 3, L_w = L_u / 12 (IEC 61400-1 ratios). `speed`,
+    `direction` and `turbulence` may be keyed (keys.Keyed); `start`,
+    `ramp` and `end` (s) fade the whole wind in and out on top of them.
 
-    speed: float
-    direction: np.ndarray
+    Keyed wind, and why its gusts stay right: the turbulence is synthesised
+    once, as a frozen field (Taylor) with the Kaimal spectrum for the
+    largest mean speed U_ref and the largest sigma_ref = I_ref U_ref of the
+    keys (for a wind without keys, its own U and sigma: the field is the
+    same as before keys existed). At time t it is read where the air that
+    carries it has travelled, int_0^t U(s) ds (m), and scaled by
+    sigma(t) / sigma_ref = I(t) U(t) / (I_ref U_ref). The Kaimal spectrum
+    depends on frequency only through n L / U, so a frozen field of
+    length scale L advected at U(t) gives a fixed point the Kaimal spectrum
+    of U(t) at every speed; its variance follows sigma(t)^2 exactly. A
+    keyed heading turns the field's axes with the wind about the middle of
+    the synthesis box: gusts keep sweeping downwind; while it turns, a point
+    at distance R from the middle sees the field slide past at R |dtheta/dt|
+    on top of the wind (a few m/s for a 45 degree turn over 6 s at 30 m)."""
+
+    speed: float | Keyed
+    direction: np.ndarray | Keyed
     reference_height: float = 10.0
     shear: float = 0.14
-    turbulence: float = 0.0
+    turbulence: float | Keyed = 0.0
     length_scale: float = 50.0
     start: float = 0.0  # s, wind ramps up over `ramp` seconds from here
     ramp: float = 2.0
     end: float = math.inf  # s, wind ramps down over `ramp` seconds from here
 
     def __post_init__(self):
+        self.heading = self.direction if isinstance(self.direction, Keyed) else None
+        if self.heading is not None:  # the direction of the strongest wind
+            peak = (self.speed.times[int(np.argmax(self.speed.at(np.array(self.speed.times))))]
+                    if isinstance(self.speed, Keyed) else self.heading.times[0])
+            a = math.radians(self.heading.at(peak))
+            self.direction = np.array([math.cos(a), math.sin(a), 0.0])
         self.direction = np.asarray(self.direction, dtype=float)
         self.direction = self.direction / np.linalg.norm(self.direction)
         self.cross = np.array([-self.direction[1], self.direction[0], 0.0])
+        self.top_speed = largest(self.speed)  # m/s, U_ref
+        self.top_turbulence = largest(self.turbulence)  # I_ref
         self._series = None
+        self._origin = None  # the point a keyed heading turns the gust field about
+        if isinstance(self.speed, Keyed):
+            self._travel0 = self.speed.integral(0.0)
+
+    def axes(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The unit horizontal vectors (3,) the wind blows toward at time t
+        (s), and the one 90 degrees counter-clockwise from it."""
+        if self.heading is None:
+            return self.direction, self.cross
+        a = math.radians(self.heading.at(t))
+        c, s = math.cos(a), math.sin(a)
+        return np.array([c, s, 0.0]), np.array([-s, c, 0.0])
+
+    def _advected(self, t: float) -> float:
+        """Where the frozen gust field is read at time t: the distance the
+        air has travelled since t = 0 over U_ref (s; t itself for a steady
+        mean speed)."""
+        if not isinstance(self.speed, Keyed):
+            return t
+        return (self.speed.integral(t) - self._travel0) / self.top_speed
+
+    def _gain(self, t: float) -> float:
+        """sigma_u(t) / sigma_ref: the gusts' scale at time t (1 without keys)."""
+        if not isinstance(self.speed, Keyed) and not isinstance(self.turbulence, Keyed):
+            return 1.0
+        return (value_at(self.turbulence, t) * value_at(self.speed, t)
+                / (self.top_turbulence * self.top_speed))
+
+    def _headings(self, duration: float, dt: float) -> np.ndarray:
+        """Unit horizontal directions (M, 2) the wind takes over the shot."""
+        times = np.union1d(np.arange(0.0, duration + dt, dt), self.heading.times)
+        a = np.radians(self.heading.at(times))
+        return np.stack([np.cos(a), np.sin(a)], axis=1)
 
     def prepare(self, rng: np.random.Generator, duration: float, extent: np.ndarray,
                 dt: float = 0.05) -> None:
         """Synthesise the turbulence for a scene lasting `duration` s over the
         horizontal box `extent` = ((xmin, ymin), (xmax, ymax)) m."""
-        if self.turbulence <= 0 or self.speed <= 0:
+        if self.top_turbulence <= 0 or self.top_speed <= 0:
             return
         lo, hi = np.asarray(extent, dtype=float)
         corners = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], lo[1]], [hi[0], hi[1]]])
-        along = corners @ self.direction[:2]
-        across = corners @ self.cross[:2]
+        if self.heading is None:
+            along = corners @ self.direction[:2]
+            across = corners @ self.cross[:2]
+        else:  # every heading the wind takes, the field turning about the box's middle
+            middle = 0.5 * (lo + hi)
+            self._origin = np.array([middle[0], middle[1], 0.0])
+            heads = self._headings(duration, dt)
+            along = (corners - middle) @ heads.T
+            across = (corners - middle) @ np.stack([-heads[:, 1], heads[:, 0]], axis=1).T
         self._along0 = float(along.min())
-        travel = (along.max() - along.min()) / self.speed
+        travel = (along.max() - along.min()) / self.top_speed
         count = math.ceil((duration + travel + 10.0) / dt)
         count += count % 2
         lateral = self.length_scale / 3
         self._cross0 = float(across.min())
         self._lane = lateral
         lanes = math.ceil((across.max() - across.min()) / lateral) + 2
-        sigma_u = self.turbulence * self.speed
+        sigma_u = self.top_turbulence * self.top_speed
         comps = ((sigma_u, self.length_scale), (0.8 * sigma_u, self.length_scale / 3),
                  (0.5 * sigma_u, self.length_scale / 12))
         self._series = np.stack([
-            np.stack([synthesize(rng, count, dt, s, length, self.speed) for s, length in comps],
-                     axis=-1)
+            np.stack([synthesize(rng, count, dt, s, length, self.top_speed)
+                      for s, length in comps], axis=-1)
             for _ in range(lanes)])  # (lanes, count, 3)
         self._pairs = np.concatenate([self._series[:-1], self._series[1:]], axis=2)
         self._dt = dt
 
-    def mean_speed(self, z: np.ndarray) -> np.ndarray:
+    def mean_speed(self, z: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Mean wind speed (m/s) at heights `z` (m) at time t (s)."""
+        return self._profile(z, value_at(self.speed, t))
+
+    def _profile(self, z: np.ndarray, speed: float) -> np.ndarray:
         z = np.maximum(z, 0.5)
-        return self.speed * (z / self.reference_height) ** self.shear
+        return speed * (z / self.reference_height) ** self.shear
 
     def ramp_factor(self, t: float) -> float:
         """0 before `start` and after `end` + `ramp`, 1 in between, with
@@ -130,23 +208,27 @@ class Wind:
         return x * x * (3 - 2 * x)
 
     def velocity(self, points: np.ndarray, t: float) -> np.ndarray:
-        """Air velocity (m/s) at `points` (N, 3) at time t."""
+        """Air velocity (m/s) at `points` (N, 3) at time t (s), the keyed
+        parameters taken at t."""
         scale = self.ramp_factor(t)
         if scale == 0.0:
             return np.zeros_like(points)
-        along_u = self.mean_speed(points[:, 2])
+        direction, cross = self.axes(t)
+        along_u = self._profile(points[:, 2], value_at(self.speed, t))
         out = np.empty_like(points)
         if self._series is None:
-            out[:] = (scale * along_u)[:, None] * self.direction
+            out[:] = (scale * along_u)[:, None] * direction
             return out
-        along = points @ self.direction - self._along0
-        pos = ((t + 5.0) - along / self.speed) / self._dt  # frozen turbulence: gusts move downwind
+        rel = points if self._origin is None else points - self._origin
+        along = rel @ direction - self._along0
+        # frozen turbulence: gusts move downwind
+        pos = ((self._advected(t) + 5.0) - along / self.top_speed) / self._dt
         start = np.floor(pos)
         w = (pos - start)[:, None]
         count = self._series.shape[1]
         i0 = start.astype(np.int64) % count
         i1 = (i0 + 1) % count
-        lane_pos = (points @ self.cross - self._cross0) / self._lane
+        lane_pos = (rel @ cross - self._cross0) / self._lane
         l0 = np.clip(np.floor(lane_pos).astype(np.int64), 0, self._series.shape[0] - 2)
         # independent lanes blended with cos/sin weights, which keeps the
         # variance (linear weights would lower it by up to half between lanes);
@@ -155,8 +237,10 @@ class Wind:
         a = self._pairs[l0, i0]
         mix = a + w * (self._pairs[l0, i1] - a)  # (N, 6): lane, next lane
         fluct = np.cos(lw)[:, None] * mix[:, 0:3] + np.sin(lw)[:, None] * mix[:, 3:6]
-        out[:] = (along_u + fluct[:, 0])[:, None] * self.direction \
-            + fluct[:, 1:2] * self.cross
+        gain = self._gain(t)
+        if gain != 1.0:
+            fluct *= gain
+        out[:] = (along_u + fluct[:, 0])[:, None] * direction + fluct[:, 1:2] * cross
         out[:, 2] += fluct[:, 2]
         if scale != 1.0:
             out *= scale
@@ -320,49 +404,75 @@ class Explosion:
 @dataclass
 class Vortex:
     """A combined Rankine vortex (tornado) moving from `start` (x, y, m) with
-    `velocity` (vx, vy, m/s), from `time` to `end` (s). Tangential speed
-    peaks at `max_speed` (m/s) at `core_radius` (m); radial inflow is
+    `velocity` (vx, vy, m/s), or along a keyed `path` of (x, y) (m; then
+    `start` and `velocity` are not used and the air moves with the path's
+    rate), from `time` to `end` (s). Tangential speed peaks at `max_speed`
+    (m/s) at `core_radius` (m), both possibly keyed; radial inflow is
     `inflow` x tangential speed outside the core, updraft `updraft` x max
     speed inside it. Counter-clockwise seen from above unless `clockwise`."""
 
     start: np.ndarray
     velocity: np.ndarray
-    max_speed: float
-    core_radius: float
+    max_speed: float | Keyed
+    core_radius: float | Keyed
     time: float = 0.0
     end: float = math.inf
     inflow: float = 0.5
     updraft: float = 0.5
     clockwise: bool = False
+    path: Keyed | None = None
 
     def __post_init__(self):
         self.start = np.asarray(self.start, dtype=float)[:2]
         self.velocity = np.asarray(self.velocity, dtype=float)[:2]
 
+    def _clamp(self, t: float) -> float:
+        return min(max(t, self.time), self.end)
+
     def centre(self, t: float) -> np.ndarray:
+        """The vortex's centre (x, y) m at time t (s)."""
+        if self.path is not None:
+            return self.path.at(self._clamp(t))
         return self.start + self.velocity * (min(max(t, self.time), self.end) - self.time)
 
+    def translation(self, t: float) -> np.ndarray:
+        """The centre's velocity (x, y) m/s at time t (s), which the air
+        around it shares."""
+        return self.velocity if self.path is None else self.path.derivative(self._clamp(t))
+
+    def reach_speed(self) -> float:
+        """The largest max_speed x core_radius over the shot (m^2/s): the
+        swirl outside the core is this over r, at most."""
+        return largest(self.core_radius) * largest(self.max_speed)
+
     def air_velocity(self, points: np.ndarray, t: float) -> np.ndarray:
+        """Air velocity (m/s) at `points` (N, 3) at time t (s), the keyed
+        parameters taken at t."""
         if t < self.time or t > self.end:
             return np.zeros_like(points)
+        max_speed = value_at(self.max_speed, t)
         d = points[:, :2] - self.centre(t)
         r = np.maximum(np.linalg.norm(d, axis=1), 1e-6)
-        rc = self.core_radius
-        v_t = np.where(r < rc, self.max_speed * r / rc, self.max_speed * rc / r)
+        rc = value_at(self.core_radius, t)
+        v_t = np.where(r < rc, max_speed * r / rc, max_speed * rc / r)
         radial = d / r[:, None]
         tangent = np.stack([-radial[:, 1], radial[:, 0]], axis=1)
         if self.clockwise:
             tangent = -tangent
         v_r = np.where(r < rc, 0.0, -self.inflow * v_t)
-        w = self.updraft * self.max_speed * np.exp(-((r / rc) ** 2))
+        w = self.updraft * max_speed * np.exp(-((r / rc) ** 2))
         out = np.zeros_like(points)
-        out[:, :2] = tangent * v_t[:, None] + radial * v_r[:, None] + self.velocity
+        out[:, :2] = tangent * v_t[:, None] + radial * v_r[:, None] + self.translation(t)
         out[:, 2] = w
         return out
 
     def distance_at_closest(self, xy: np.ndarray, t0: float, t1: float) -> np.ndarray:
         """Smallest horizontal distance (m) from each point to the vortex
-        centre between t0 and t1."""
+        centre between t0 and t1 (s); for a keyed path a lower bound
+        (Keyed.closest_distance), never more than the truth, so culling
+        never drops a tree the vortex reaches."""
+        if self.path is not None:
+            return self.path.closest_distance(xy, self._clamp(t0), self._clamp(t1))
         a = self.centre(t0)
         b = self.centre(t1)
         ab = b - a
@@ -376,22 +486,30 @@ class Vortex:
 class Attractor:
     """Acceleration toward `position` (m): `strength` m/s^2 at `radius` m,
     falling as 1/r^2 outside and linearly to zero inside (a uniform sphere's
-    gravity), active from `time` to `end` (s)."""
+    gravity), active from `time` to `end` (s). `position` (x, y, z) and
+    `strength` may be keyed."""
 
-    position: np.ndarray
-    strength: float
+    position: np.ndarray | Keyed
+    strength: float | Keyed
     radius: float = 1.0
     time: float = 0.0
     end: float = math.inf
 
     def __post_init__(self):
-        self.position = np.asarray(self.position, dtype=float)
+        if not isinstance(self.position, Keyed):
+            self.position = np.asarray(self.position, dtype=float)
+
+    def position_at(self, t: float) -> np.ndarray:
+        """The point (x, y, z) m at time t (s)."""
+        return self.position.at(t) if isinstance(self.position, Keyed) else self.position
 
     def acceleration(self, points: np.ndarray, t: float) -> np.ndarray:
+        """Acceleration (m/s^2) at `points` (N, 3) at time t (s)."""
         if t < self.time or t > self.end:
             return np.zeros_like(points)
-        d = self.position - points
+        d = self.position_at(t) - points
         r = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
-        mag = np.where(r > self.radius, self.strength * (self.radius / r) ** 2,
-                       self.strength * r / self.radius)
+        strength = value_at(self.strength, t)
+        mag = np.where(r > self.radius, strength * (self.radius / r) ** 2,
+                       strength * r / self.radius)
         return d / r[:, None] * mag[:, None]

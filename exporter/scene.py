@@ -4,6 +4,9 @@ Every key is validated against its entry in scene_keys.py (meaning, unit,
 default, range: the one source docs/scenes.md is generated from); an error
 names the file, the key, the value and the allowed range. Paths (grammars)
 are relative to the scene file. Units: m, s, kg, m/s, degrees for angles.
+A key the table marks `keyed` takes a value or a list of keys {time, value}
+(keys.Keyed; docs/scenes.md, "Keys"), each key checked like a plain value
+and its time within the shot.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +22,7 @@ import numpy as np
 
 from . import library
 from .errors import InputError, SceneError
+from .keys import INTERPOLATIONS, Keyed
 from .names import MAX_TREE_NAME, is_valid, make_valid
 from .quality import QUALITIES, Quality
 from .scene_keys import (
@@ -57,13 +61,14 @@ class TreeSpec:
     quality: str | None = TREE["quality"].default  # per-tree override (e.g. far trees)
 
 
+# A keyed key's field holds a plain value, or a keys.Keyed curve through its keys.
 @dataclass
 class WindSpec:
-    speed: float  # m/s at reference height
-    direction: float = WIND["direction"].default  # degrees, blowing toward, CCW from +X
+    speed: float | Keyed  # m/s at reference height
+    direction: float | Keyed = WIND["direction"].default  # degrees, blowing toward, CCW from +X
     reference_height: float = WIND["reference_height"].default  # m
     shear: float = WIND["shear"].default
-    turbulence: float = WIND["turbulence"].default  # sigma_u / U
+    turbulence: float | Keyed = WIND["turbulence"].default  # sigma_u / U
     length_scale: float = WIND["length_scale"].default  # m
     start: float = WIND["start"].default  # s
     ramp: float = WIND["ramp"].default  # s
@@ -79,10 +84,11 @@ class ExplosionSpec:
 
 @dataclass
 class VortexSpec:
-    start: tuple[float, float]
-    velocity: tuple[float, float]
-    max_speed: float
-    core_radius: float
+    start: tuple[float, float] | None  # m; None: the centre follows `path`
+    velocity: tuple[float, float]  # m/s
+    max_speed: float | Keyed  # m/s
+    core_radius: float | Keyed  # m
+    path: Keyed | None = VORTEX["path"].default  # (x, y) m over the shot
     time: float = VORTEX["time"].default
     end: float = VORTEX["end"].default
     inflow: float = VORTEX["inflow"].default
@@ -92,8 +98,8 @@ class VortexSpec:
 
 @dataclass
 class AttractorSpec:
-    position: tuple[float, float, float]
-    strength: float
+    position: tuple[float, float, float] | Keyed  # m
+    strength: float | Keyed  # m/s^2
     radius: float = ATTRACTOR["radius"].default
     time: float = ATTRACTOR["time"].default
     end: float = ATTRACTOR["end"].default
@@ -178,6 +184,14 @@ class Scene:
 # ---------------------------------------------------------------------------
 # validation helpers
 
+INTERPOLATION = "_interpolation"  # `speed_interpolation`: how `speed`'s keys interpolate
+KEYS_FORM = "[{time = ..., value = ...}, ...]"
+
+
+def is_keys(value: Any) -> bool:
+    """Whether a scene value is a list of keys (tables), not a plain value."""
+    return isinstance(value, list) and any(isinstance(x, dict) for x in value)
+
 
 class _Reader:
     """Reads keys by their scene_keys.Key: type, default and range checks,
@@ -188,6 +202,7 @@ class _Reader:
     def __init__(self, file: str):
         self.file = file
         self.tree_names: set[str] = set()
+        self.horizon = math.inf  # s: keys' times must be within [0, horizon] (the shot)
 
     def fail(self, key: str, message: str) -> SceneError:
         return SceneError(key, message, self.file)
@@ -198,6 +213,15 @@ class _Reader:
         return data
 
     def check_keys(self, data: dict, path: str, allowed) -> None:
+        """Every key of `data` is in `allowed` (names or a table of Keys,
+        whose keyed ones also take `<name>_interpolation`, beside keys)."""
+        if isinstance(allowed, dict):
+            keyed = [k for k, spec in allowed.items() if spec.keyed]
+            allowed = [*allowed, *(f"{k}{INTERPOLATION}" for k in keyed)]
+            for k in keyed:
+                if f"{k}{INTERPOLATION}" in data and not is_keys(data.get(k)):
+                    raise self.fail(f"{path}{k}{INTERPOLATION}",
+                                    f"applies to keys, and {path}{k} is not a list of keys")
         for k in data:
             if k not in allowed:
                 raise self.fail(f"{path}{k}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
@@ -208,12 +232,16 @@ class _Reader:
         and `hi` override the table's where they depend on the scene)."""
         full = f"{path}{spec.name}"
         default = spec.default if default is self._UNSET else default
+        if spec.keyed and is_keys(data.get(spec.name)):
+            return self.keyed(data, spec, path, hi)
         if spec.name not in data:
             if default is None and spec.required:
                 raise self.fail(full, "is required")
             return default
         v = data[spec.name]
         hi = spec.hi if hi is None else hi
+        if spec.keyed and v == []:
+            raise self.fail(full, f"is an empty list: give a value or keys {KEYS_FORM}")
         if spec.kind in ("number", "integer"):
             return self._number(full, v, spec, hi)
         if spec.kind == "bool":
@@ -229,7 +257,8 @@ class _Reader:
         if spec.kind == "vector":
             if not isinstance(v, list) or len(v) != spec.n or not all(
                     isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                raise self.fail(full, f"must be a list of {spec.n} numbers, got {v!r}")
+                keys = f", or keys {KEYS_FORM}" if spec.keyed else ""
+                raise self.fail(full, f"must be a list of {spec.n} numbers{keys}, got {v!r}")
             for x in v:
                 if not spec.lo <= x <= spec.hi:
                     raise self.fail(full, f"value {x!r} is out of range {spec.range_text()}"
@@ -239,7 +268,8 @@ class _Reader:
 
     def _number(self, full: str, v, spec: Key, hi) -> Any:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(full, f"must be a number, got {v!r}")
+            keys = f", or keys {KEYS_FORM}" if spec.keyed else ""
+            raise self.fail(full, f"must be a number{keys}, got {v!r}")
         integer = spec.kind == "integer"
         if integer and int(v) != v:
             raise self.fail(full, f"must be a whole number, got {v!r}")
@@ -250,6 +280,39 @@ class _Reader:
             raise self.fail(full, shown.out_of_range(v))
         return int(v) if integer else float(v)
 
+    def keyed(self, data: dict, spec: Key, path: str, hi: float | None = None,
+              convert=None) -> Keyed:
+        """The keys of `spec` in `data` (a list of {time, value} tables) as
+        a Keyed curve with the interpolation `<name>_interpolation` names
+        (linear unless given): each time within the shot and later than
+        the one before, each value checked as the key's plain value is
+        (then passed through `convert`, e.g. a Beaufort name to m/s)."""
+        full = f"{path}{spec.name}"
+        times: list[float] = []
+        values: list = []
+        plain = replace(spec, name="value", keyed=False)
+        shot = Key("time", "", "s", lo=0.0, hi=self.horizon)
+        for i, k in enumerate(data[spec.name]):
+            kp = f"{full}[{i}]"
+            if not isinstance(k, dict):
+                raise self.fail(kp, f"must be a key {{time, value}}, got {k!r}")
+            self.check_keys(k, f"{kp}.", ("time", "value"))
+            for need in ("time", "value"):
+                if need not in k:
+                    raise self.fail(f"{kp}.{need}", "is required")
+            t = self._number(f"{kp}.time", k["time"], shot, self.horizon)
+            if times and t <= times[-1]:
+                raise self.fail(f"{kp}.time", f"= {t:g} s must be later than the key before "
+                                f"it ({times[-1]:g} s): keys go in time order, one per time")
+            value = self.key({"value": k["value"]}, plain, f"{kp}.", hi=hi)
+            times.append(t)
+            values.append(value if convert is None else convert(value))
+        name = f"{full}{INTERPOLATION}"
+        how = data.get(f"{spec.name}{INTERPOLATION}", "linear")
+        if not isinstance(how, str) or how not in INTERPOLATIONS:
+            raise self.fail(name, f"= {how!r} is not one of: {', '.join(INTERPOLATIONS)}")
+        return Keyed(tuple(times), tuple(values), how, angular=spec.unit == "degrees")
+
     def keys(self, data: dict, table: dict[str, Key], path: str, **given) -> dict:
         """Every key of a table that plain reading covers, checked; `given`
         are values the caller reads itself."""
@@ -258,9 +321,33 @@ class _Reader:
                 for name, spec in table.items()}
 
 
+def with_wind_speed(wind: Any, speed: Any) -> Any:
+    """A `[wind]` table with its speed (m/s at 10 m) replaced by `speed`:
+    its `beaufort` and either's keys' interpolation go (the override is
+    one value for the whole shot). Anything but a table is left as it is."""
+    if not isinstance(wind, dict):
+        return wind
+    gone = ("beaufort", f"beaufort{INTERPOLATION}", f"speed{INTERPOLATION}")
+    return {**{k: v for k, v in wind.items() if k not in gone}, "speed": speed}
+
+
+def key_horizon(raw: dict, overrides: dict) -> float | None:
+    """The shot the keys' times are checked against when `overrides`
+    change the duration: the longer of the file's and the override's (a
+    shorter --duration bakes the start of the keyed curves, it does not
+    make the file wrong); None when the duration is not overridden."""
+    if "duration" not in overrides:
+        return None
+    given = raw.get("duration", TOP["duration"].default)
+    if isinstance(given, bool) or not isinstance(given, (int, float)):
+        return None
+    return min(float(given), TOP["duration"].hi)
+
+
 def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     """Read and validate a scene file. `overrides` replace top-level keys
-    (and `wind.speed`) before validation, so they are checked the same way."""
+    (and `wind.speed`) before validation, so they are checked the same way
+    (keys' times against the file's own duration: key_horizon)."""
     p = Path(path)
     try:
         data = p.read_bytes()
@@ -275,17 +362,19 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     except RecursionError:  # arrays or tables nested hundreds deep
         raise SceneError("(syntax)", "nested too deep to be a scene", str(p)) from None
     digest = hashlib.sha256(data)
+    horizon = None
     if overrides:
+        horizon = key_horizon(raw, overrides)
         raw = dict(raw)
         for key, value in overrides.items():
             if key == "wind.speed":
                 if isinstance(raw.get("wind"), dict):
-                    raw["wind"] = {k: v for k, v in raw["wind"].items() if k != "beaufort"}
-                    raw["wind"]["speed"] = value
+                    raw["wind"] = with_wind_speed(raw["wind"], value)
             else:
                 raw[key] = value
         digest.update(repr(sorted(overrides.items())).encode())
-    return parse_scene(raw, file=str(p), base=p.parent, source_hash=digest.hexdigest())
+    return parse_scene(raw, file=str(p), base=p.parent, source_hash=digest.hexdigest(),
+                       horizon=horizon)
 
 
 def load_job(path: str | Path, overrides: dict | None = None) -> Scene:
@@ -308,7 +397,10 @@ def load_job(path: str | Path, overrides: dict | None = None) -> Scene:
 
 
 def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
-                source_hash: str = "") -> Scene:
+                source_hash: str = "", horizon: float | None = None) -> Scene:
+    """A Scene from a scene file's table. Keys' times must lie within the
+    shot, 0 to `duration` s (or to `horizon` s where that is longer: the
+    file's duration when an override shortened it, key_horizon)."""
     r = _Reader(file)
     r.check_keys(raw, "", TOP)
     scene = Scene(
@@ -318,6 +410,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         **{k: r.key(raw, TOP[k], "") for k in ("duration", "fps", "frame_start", "seed",
                                                 "gravity", "prestress", "ground")},
     )
+    r.horizon = scene.duration if horizon is None else max(scene.duration, horizon)
     scene.quality = _quality(r, raw.get("quality", TOP["quality"].default))
     formats = raw.get("formats", [])
     allowed_formats = TOP["formats"].choices
@@ -343,7 +436,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         scene.explosions.append(ExplosionSpec(**r.keys(e, EXPLOSION, f"explosion[{i}].")))
     for i, v in enumerate(_array(r, raw, "vortex")):
         p = f"vortex[{i}]."
-        scene.vortices.append(VortexSpec(**r.keys(v, VORTEX, p)))
+        scene.vortices.append(_vortex(r, v, p))
         _check_interval(r, scene.vortices[-1], p)
     for i, a in enumerate(_array(r, raw, "attractor")):
         p = f"attractor[{i}]."
@@ -367,6 +460,19 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     if "camera" in raw:
         scene.camera = _camera(r, r.table(raw["camera"], "camera"))
     return scene
+
+
+def _vortex(r: _Reader, v: dict, p: str) -> VortexSpec:
+    """A vortex: its centre from `start` (and `velocity`) or from `path`."""
+    spec = VortexSpec(**r.keys(v, VORTEX, p))
+    if spec.path is None and spec.start is None:
+        raise r.fail(f"{p}start", "is required (or give path)")
+    if spec.path is not None:
+        if "start" in v or "velocity" in v:
+            raise r.fail(f"{p}path", "give either path or start and velocity, not both")
+        if not isinstance(spec.path, Keyed):  # a fixed centre
+            spec.path = Keyed.constant(spec.path)
+    return spec
 
 
 def _check_interval(r: _Reader, spec, p: str) -> None:
@@ -531,22 +637,30 @@ def _scatter(rng: np.random.Generator, count: int, area, spacing: float) -> list
     return pts
 
 
+def beaufort_speed(name: str) -> float:
+    """The middle of a WMO Beaufort band (m/s at 10 m); the top band's is
+    5 m/s above its lower bound."""
+    names = list(BEAUFORT)
+    i = names.index(name)
+    hi = BEAUFORT[names[i + 1]] if i + 1 < len(names) else BEAUFORT[name] + 10
+    return 0.5 * (BEAUFORT[name] + hi)
+
+
 def _wind(r: _Reader, w: dict) -> WindSpec:
     p = "wind."
     r.check_keys(w, p, WIND)
     if "beaufort" in w:
-        name = r.key(w, WIND["beaufort"], p)
         if "speed" in w:
             raise r.fail(f"{p}beaufort", "give either speed or beaufort, not both")
-        names = list(BEAUFORT)
-        i = names.index(name)
-        hi = BEAUFORT[names[i + 1]] if i + 1 < len(names) else BEAUFORT[name] + 10
-        speed = 0.5 * (BEAUFORT[name] + hi)
+        if is_keys(w["beaufort"]):  # keys of band names: of their middle speeds
+            speed = r.keyed(w, WIND["beaufort"], p, convert=beaufort_speed)
+        else:
+            speed = beaufort_speed(r.key(w, WIND["beaufort"], p))
     else:
         speed = r.key(w, WIND["speed"], p)
         if speed is None:
             raise r.fail(f"{p}speed", "is required (or give beaufort)")
-    values = r.keys(w, WIND, p, speed=speed)
+    values = r.keys(w, WIND, p, speed=speed, beaufort=None)
     values.pop("beaufort")
     spec = WindSpec(**values)
     if spec.end < spec.start:

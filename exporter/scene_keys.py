@@ -83,15 +83,16 @@ FOREST = table(
 
 WIND = table(
     Key("speed", "mean speed at `reference_height`", "m/s", None, 0.0, 120.0,
-        doc_default="— (or `beaufort`)"),
+        doc_default="— (or `beaufort`)", keyed=True),
     Key("beaufort", "instead of `speed`: the middle of a WMO Beaufort band", kind="choice",
-        choices=tuple(BEAUFORT), doc_default="none", doc_range="`light air` … `hurricane`"),
+        choices=tuple(BEAUFORT), doc_default="none", doc_range="`calm` … `hurricane`",
+        keyed=True),
     Key("direction", "direction the wind blows toward, counter-clockwise from +X", "degrees",
-        0.0, -360.0, 360.0),
+        0.0, -360.0, 360.0, keyed=True),
     Key("reference_height", "height of `speed`", "m", 10.0, 1.0, 500.0),
     Key("shear", "power-law exponent of the profile", "", 0.14, 0.0, 0.6),
     Key("turbulence", "intensity σ_u / U (0 = steady; 0.2 open country, 0.3–0.5 near and in "
-        "forests)", "", 0.0, 0.0, 1.0),
+        "forests)", "", 0.0, 0.0, 1.0, keyed=True),
     Key("length_scale", "longitudinal integral length scale of the gusts", "m", 50.0, 1.0,
         2000.0),
     Key("start", "the wind rises from here over `ramp`", "s", 0.0, 0.0, 3600.0),
@@ -107,10 +108,15 @@ EXPLOSION = table(
 )
 
 VORTEX = table(
-    Key("start", "centre at `time`", "m (x, y)", None, -1e6, 1e6, "vector", n=2),
+    Key("start", "centre at `time`", "m (x, y)", None, -1e6, 1e6, "vector", n=2,
+        doc_default="— (or `path`)"),
     Key("velocity", "translation", "m/s (x, y)", (0.0, 0.0), -200.0, 200.0, "vector", n=2),
-    Key("max_speed", "peak tangential wind, at the core's edge", "m/s", None, 0.0, 150.0),
-    Key("core_radius", "radius of the solid-body core", "m", None, 1.0, 2000.0),
+    Key("path", "instead of `start` and `velocity`: the centre over the shot (the air "
+        "moves with it)", "m (x, y)", None, -1e6, 1e6, "vector", n=2, doc_default="none",
+        keyed=True),
+    Key("max_speed", "peak tangential wind, at the core's edge", "m/s", None, 0.0, 150.0,
+        keyed=True),
+    Key("core_radius", "radius of the solid-body core", "m", None, 1.0, 2000.0, keyed=True),
     Key("time", "start of the active interval", "s", 0.0, 0.0, 3600.0),
     Key("end", "end of the active interval", "s", math.inf, 0.0, doc_default=NEVER,
         doc_range="≥ `time`"),
@@ -120,9 +126,9 @@ VORTEX = table(
 )
 
 ATTRACTOR = table(
-    Key("position", "the point", "m (x, y, z)", None, -1e6, 1e6, "vector", n=3),
+    Key("position", "the point", "m (x, y, z)", None, -1e6, 1e6, "vector", n=3, keyed=True),
     Key("strength", "acceleration toward it at `radius` (negative repels); 1/r² outside, "
-        "falling linearly to zero inside", "m/s²", None, -1000.0, 1000.0),
+        "falling linearly to zero inside", "m/s²", None, -1000.0, 1000.0, keyed=True),
     Key("radius", "", "m", 1.0, 0.01, 1000.0),
     Key("time", "start", "s", 0.0, 0.0),
     Key("end", "end", "s", math.inf, 0.0, doc_default=NEVER, doc_range="≥ `time`"),

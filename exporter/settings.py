@@ -22,7 +22,10 @@ class Key:
     happens instead); lo, hi: the allowed closed range (None: unbounded);
     doc_default / doc_range: what the docs show when the rule is not a
     plain value (a default from elsewhere, a range that depends on the
-    scene)."""
+    scene). keyed: the key also takes a list of keys {time, value} over
+    the shot (keys.Keyed, docs/scenes.md "Keys"), each value checked as a
+    plain value is; a key with unit "degrees" is then an angle,
+    interpolated the short way round."""
 
     name: str
     meaning: str
@@ -36,6 +39,7 @@ class Key:
     doc_default: str | None = None
     doc_range: str | None = None
     aliases: tuple[str, ...] = ()
+    keyed: bool = False
 
     @property
     def required(self) -> bool:
@@ -112,5 +116,8 @@ def markdown(keys: dict[str, Key], quote=lambda k: f"`{k.name}`") -> str:
         name = quote(k)
         if k.aliases:
             name += " (" + ", ".join(f"`{a}`" for a in k.aliases) + ")"
-        rows.append(f"| {name} | {k.meaning} | {k.unit} | {_default(k)} | {_range(k)} |")
+        meaning = k.meaning
+        if k.keyed:
+            meaning = f"{meaning}; or [keys](#keys)" if meaning else "a value or [keys](#keys)"
+        rows.append(f"| {name} | {meaning} | {k.unit} | {_default(k)} | {_range(k)} |")
     return "\n".join(rows)

@@ -19,11 +19,15 @@ def test_parallel_and_serial_forest_bakes_are_identical():
     assert one["simulated_trees"] <= 10 and one["segments"] > 0
 
 
-@pytest.mark.parametrize("count", [0, 10])
-def test_script_reports_every_figure(tmp_path, count):
+# the calibration (the every-segment truth on 50 trees: 45 s) runs once, under
+# -m slow; by default the reference's step is given
+@pytest.mark.parametrize("count,step", [(0, "1/240"), (10, "1/240"),
+                                        pytest.param(10, None, marks=pytest.mark.slow)])
+def test_script_reports_every_figure(tmp_path, count, step):
     done = subprocess.run([sys.executable, str(ROOT / "bench" / "forest.py"), "--counts",
                            str(count), "--duration", "1", "--settings", "lod", "reference",
-                           "--out", str(tmp_path)], capture_output=True, text=True, check=False)
+                           "--out", str(tmp_path), *(["--step", step] if step else [])],
+                          capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     data = json.loads((tmp_path / "forest.json").read_text())
     for row in data["rows"]:

@@ -188,6 +188,7 @@ def test_an_uprooted_palm_on_the_reference_creates_no_energy():
     assert (closest["tree"], closest["segment"]) in broke
 
 
+@pytest.mark.slow  # 70 s: the tornado's debris on the reference; the stress suite's tornado case runs by default
 def test_tornado_debris_rolling_on_the_ground_creates_no_energy():
     """The tornado preset on the default LOD (12 s): the trees in its path are
     handed to the reference, a broadleaf is uprooted and broken up, and its
@@ -384,6 +385,7 @@ def converged_reference(scene, monkeypatch, step: float = 1 / 8000):
         return bake_scene(scene, solver="full", timestep=step)
 
 
+@pytest.mark.slow  # 115 s; the blast hand-over tests beside it run by default
 def test_a_blast_breaks_as_many_twigs_on_the_lod_as_on_the_reference(root, monkeypatch):
     """The `explosion` preset's charge on its oak and sapling (10 kg of TNT
     10 and 9.2 m away), against the reference at 1/8000 s with its loads

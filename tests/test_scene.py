@@ -1,6 +1,7 @@
 """Scene files: every preset loads; bad keys and values give errors that
 name the file, the key, the value and the allowed range."""
 
+import numpy as np
 import pytest
 from conftest import PRESETS
 from treebake.errors import SceneError
@@ -31,6 +32,21 @@ def test_beaufort_presets_are_in_their_wmo_bands():
         hi_speed = bands[i + 1][1]
         assert lo_speed <= wind.speed < hi_speed
     assert load_scene(PRESETS / "hurricane.toml").wind.speed >= 32.7
+
+
+def test_storm_builds_from_calm_to_a_gale_while_it_veers():
+    """The storm preset (issue 41): calm at the start, inside the WMO gale
+    band (Beaufort 8, 17.2-20.8 m/s at 10 m) at the end, never above it, and a
+    change of direction on a few trees."""
+    storm = load_scene(PRESETS / "storm.toml")
+    speed, heading = storm.wind.speed, storm.wind.direction
+    t = np.linspace(0.0, storm.duration, 1401)
+    u = speed.at(t)
+    assert u[0] < BEAUFORT["light air"] and BEAUFORT["gale"] <= u[-1] < BEAUFORT["strong gale"]
+    assert u.max() < BEAUFORT["strong gale"] and np.all(np.diff(u) >= 0)  # builds, no overshoot
+    turn = heading.at(storm.duration) - heading.at(0.0)
+    assert 30.0 <= abs(turn) <= 90.0
+    assert 2 <= len(storm.trees) <= 5
 
 
 def scene_error(raw, match):

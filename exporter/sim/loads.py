@@ -1,5 +1,8 @@
 """A scene's force fields combined into one evaluator on bone arrays, shared
-by the planar LOD and the MuJoCo reference so both see identical loads."""
+by the planar LOD and the MuJoCo reference so both see identical loads.
+Keyed parameters (keys.Keyed) are taken at the time each engine asks
+(`forces`, `air_velocity`); where a bound over the shot is needed (which
+trees a force can reach) the largest key is used."""
 
 from __future__ import annotations
 
@@ -9,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..forces import Attractor, Explosion, Vortex, Wind, drag
+from ..keys import Keyed, always_zero, largest
 from ..scene import Scene
 
 # Below these, a field is taken not to move a tree (used to skip simulation).
@@ -49,21 +53,27 @@ class SceneLoads:
         self.blast_capped = np.zeros(0)  # m/s^2, per bone: its capped blast (0: none)
         rng = np.random.default_rng(scene.seed)
         self.wind = None
-        if scene.wind is not None and scene.wind.speed > 0:
+        if scene.wind is not None and largest(scene.wind.speed) > 0:
             w = scene.wind
-            a = math.radians(w.direction)
-            self.wind = Wind(w.speed, np.array([math.cos(a), math.sin(a), 0.0]),
-                             w.reference_height, w.shear, w.turbulence, w.length_scale,
-                             w.start, w.ramp, w.end)
+            if isinstance(w.direction, Keyed):
+                direction = w.direction
+            else:
+                a = math.radians(w.direction)
+                direction = np.array([math.cos(a), math.sin(a), 0.0])
+            self.wind = Wind(w.speed, direction, w.reference_height, w.shear, w.turbulence,
+                             w.length_scale, w.start, w.ramp, w.end)
             if extent is None:
                 extent = np.array([[-10.0, -10.0], [10.0, 10.0]])
             self.wind.prepare(rng, scene.duration, extent)
         self.explosions = [Explosion(np.array(e.position), e.time, e.charge)
                            for e in scene.explosions]
-        self.vortices = [Vortex(np.array(v.start), np.array(v.velocity), v.max_speed,
-                                v.core_radius, v.time, v.end, v.inflow, v.updraft, v.clockwise)
+        self.vortices = [Vortex(np.array(v.start if v.path is None else v.path.values[0]),
+                                np.array(v.velocity), v.max_speed, v.core_radius, v.time, v.end,
+                                v.inflow, v.updraft, v.clockwise, v.path)
                          for v in scene.vortices]
-        self.attractors = [Attractor(np.array(a.position), a.strength, a.radius, a.time, a.end)
+        self.attractors = [Attractor(a.position if isinstance(a.position, Keyed)
+                                     else np.array(a.position), a.strength, a.radius, a.time,
+                                     a.end)
                            for a in scene.attractors]
 
     def dominant_direction(self, base: np.ndarray, cut=None, pulls=()) -> np.ndarray | None:
@@ -87,7 +97,7 @@ class SceneLoads:
             if (d := _horizontal(base[:2] - v.centre(v.time))) is not None:
                 return np.array([-d[1], d[0], 0.0])  # the swirl is tangential
         for a in self.attractors:
-            if (d := _horizontal(a.position - base)) is not None:
+            if (d := _horizontal(a.position_at(a.time) - base)) is not None:
                 return d
         for p in self.scene.projectiles:
             if (d := _horizontal(p.velocity)) is not None:
@@ -192,7 +202,8 @@ class SceneLoads:
     def quiet_after(self, centre: np.ndarray, radius: float, height: float) -> float:
         """Time (s) after which no time-varying load reaches a tree whose
         crown fits in a vertical cylinder (centre xy, radius, height): 0 if
-        none ever does, inf if one lasts all scene (wind)."""
+        none ever does, inf if one lasts all scene (wind). Keyed strengths
+        and radii count at their largest, keyed paths at their closest."""
         quiet = 0.0
         if self.wind is not None:
             quiet = self.wind.end + self.wind.ramp
@@ -202,12 +213,12 @@ class SceneLoads:
                 quiet = max(quiet, e.time + d / 300.0 + 2.0)
         for v in self.vortices:
             # outside the core the swirl falls as 1/r: reach where it drops below MIN_AIR_SPEED
-            reach = v.core_radius * v.max_speed / MIN_AIR_SPEED
+            reach = v.reach_speed() / MIN_AIR_SPEED
             t1 = min(v.end, self.scene.duration)
             if v.distance_at_closest(centre[None, :2], v.time, t1)[0] - radius < reach:
                 quiet = max(quiet, t1)
         for a in self.attractors:
-            if a.strength != 0:
+            if not always_zero(a.strength):
                 quiet = max(quiet, min(a.end, self.scene.duration))
         return quiet
 

@@ -16,8 +16,9 @@ PRESETS = ROOT / "presets"
 # every preset; "forest" is replaced by a 20-tree forest of the same grammars
 NAMES = sorted(p.stem for p in PRESETS.glob("*.toml"))
 # long enough that each preset's event happens: boxes hit and break at 2.3 s,
-# the explosion breaks twigs at 1.1 s, the felled tree starts to tip after its cut at 1 s
-DURATION = {"boxes": 2.5, "explosion": 1.5, "felling": 3.0}
+# the explosion breaks twigs at 1.1 s, the felled tree starts to tip after its cut at 1 s,
+# the storm rises from calm (4.7 m/s at 3 s)
+DURATION = {"boxes": 2.5, "explosion": 1.5, "felling": 3.0, "storm": 3.0}
 
 
 @functools.cache
