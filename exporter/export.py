@@ -190,6 +190,14 @@ class TreeMeshes(Sequence[TreeMesh]):
         return [self.facts[i] for i in range(len(self))]
 
 
+def build_meshes(bake: Bake, opts: MeshOptions) -> tuple[list[TreeMesh], int]:
+    """Every tree's mesh at once, and how many joints broke (split in the
+    mesh): for scripts and checks; exports build them one at a time."""
+    meshes = TreeMeshes(bake, opts)
+    built = list(meshes)
+    return built, sum(f.broken_joints for f in meshes.all_facts())
+
+
 def _inputs(bake: Bake, bake_path: Path | None, facts: list[TreeFacts]) -> dict:
     meta = bake.meta
     out = {"bake": None, "scene": meta.get("scene"), "scene_hash": meta.get("scene_hash"),
