@@ -125,7 +125,7 @@ def calibrate(log=print) -> dict:
 def run_one(count: int, setting: str, duration: float, workers: int,
             step: float = 1 / 240) -> dict:
     """Bake (and export to glb) one configuration in this process."""
-    from treebake.bake import save_bake
+    from treebake.bake_file import save_bake
     from treebake.export import ExportOptions, export_bake
     from treebake.pipeline import bake_scene
     from treebake.scene import parse_scene

@@ -105,7 +105,7 @@ def run_one(job: str, setting: str, out: Path) -> dict:
     Also where the process's CPU time went: start-up (the interpreter and
     numpy), the package's imports, the scene, the bake, the save."""
     started = time.process_time()  # the interpreter and this script's imports (numpy)
-    from treebake.bake import save_bake
+    from treebake.bake_file import save_bake
     from treebake.pipeline import bake_scene
     from treebake.quality import QUALITIES
     if setting.startswith("lod") or setting == "pymunk":
@@ -214,7 +214,7 @@ def main() -> None:
     if args.one:
         print(json.dumps(run_one(args.one[0], args.one[1], Path(args.one[2]))))
         return
-    from treebake.bake import load_bake
+    from treebake.bake_file import load_bake
 
     # an installed package has its bytecode compiled (pip does it); without
     # it (PYTHONDONTWRITEBYTECODE, a fresh checkout) every process here would

@@ -47,14 +47,14 @@ def bake_scene(scene, solver: str = "planar", workers: int = 1, progress=None, q
 
 def save_bake(bake, path: str | Path) -> Path:
     """Write a bake as `.npz`, atomically; the same bake gives the same bytes."""
-    from .bake import save_bake as _save
+    from .bake_file import save_bake as _save
 
     return _save(bake, path)
 
 
 def load_bake(path: str | Path):
     """Read a `.npz` bake written by `save_bake` or `treebake bake`."""
-    from .bake import load_bake as _load
+    from .bake_file import load_bake as _load
 
     return _load(path)
 

@@ -23,17 +23,13 @@ the same bytes.
 
 from __future__ import annotations
 
-import io
-import json
-import zipfile
-import zlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
-from .fileio import atomic_path
 from .rotations import angle_between, qrotate
 from .versions import runtime_versions
 
@@ -162,10 +158,13 @@ class ObjectsBake:
 @dataclass
 class Bake:
     times: np.ndarray  # (F,) s
-    trees: list[TreeBake]
+    trees: Sequence[TreeBake]  # a list, or read tree by tree from a file (bake_file.py)
     meta: dict  # saved: deterministic facts about the bake
     objects: ObjectsBake | None = None
     timing: dict = field(default_factory=dict)  # not saved: seconds spent (varies run to run)
+    # the order the trees were finished and are stored in (bake_file.py);
+    # None: index order. Not motion: kept so a bake saved again keeps its bytes
+    order: list[int] | None = None
 
     @property
     def fps(self) -> float:
@@ -176,25 +175,32 @@ class Bake:
         return 0 if tree.static else f
 
 
-def bake_from(scene, solver: str, grown: list, rigged, result, timing: dict) -> Bake:
-    """The bake stage: the Bake of a scene (scene.Scene) as `solver` ("planar"
-    or "full") simulated it: its grown trees (grow.GrownTree), rigged
-    (sim.rigging.RiggedScene), the solver's result (sim.solver.SolveResult:
-    motions by tree name, projectile tracks, meta, notes, engines), and the
-    timings (s) so far. Its meta holds what made it (the versions that
-    decide its motion, versions.py) and the scene's settings."""
-    trees = []
-    for g, sim_tree in zip(grown, rigged.trees):
-        info = {"grammar": g.grammar, "grammar_hash": g.grammar_hash, "seed": g.seed,
-                "first_frequency_hz": round(sim_tree.rig.first_frequency, 5),
-                "bones": sim_tree.rig.n_bones}
-        motion = result.motions.get(g.model.name)
-        if motion is None:
-            info["static"] = rigged.static.get(g.model.name, "not simulated")
-        else:
-            info["solver"] = result.tiers.get(g.model.name, str(solver))
-            info["events"] = [e.record() for e in motion.events]
-        trees.append(tree_bake_from_motion(g.model, sim_tree.rig, motion, info))
+def grown_info(grown, rig) -> dict:
+    """What made a tree (grammar, its hash, seed) and its rig's first
+    frequency (Hz) and bones: every tree's bake info starts with these."""
+    return {"grammar": grown.grammar, "grammar_hash": grown.grammar_hash, "seed": grown.seed,
+            "first_frequency_hz": round(rig.first_frequency, 5), "bones": rig.n_bones}
+
+
+def static_tree_bake(grown, rig, reason: str) -> TreeBake:
+    """A tree nothing moves (one frame, its rest pose): `reason` says why
+    it was not simulated."""
+    return tree_bake_from_motion(grown.model, rig, None, dict(grown_info(grown, rig),
+                                                              static=reason))
+
+
+def moved_tree_bake(grown, rig, motion, engines: str) -> TreeBake:
+    """A simulated tree's bake from its motion (sim.common.TreeMotion);
+    `engines` in words, which engines moved it and from when."""
+    info = dict(grown_info(grown, rig), solver=engines,
+                events=[e.record() for e in motion.events])
+    return tree_bake_from_motion(grown.model, rig, motion, info)
+
+
+def bake_meta(scene, solver: str, rigged, result) -> dict:
+    """A bake's meta: what made it (the versions that decide its motion,
+    versions.py), the scene's settings, what culling left out, and the
+    solver's result's meta and notes (sim.solver.SolveResult)."""
     versions = runtime_versions()
     meta = {"tool": f"treebake {versions['treebake']}", "versions": versions,
             "scene": scene.name, "scene_hash": scene.source_hash, "fps": scene.fps,
@@ -204,11 +210,16 @@ def bake_from(scene, solver: str, grown: list, rigged, result, timing: dict) -> 
             "culling": rigged.culled,  # trees removed or coarsened by each rule
             "frame_start": scene.frame_start,  # the exporters' number of frame 0
             **result.meta}
-    if result.motions:
+    if any(t.active for t in rigged.trees):
         meta["notes"] = result.notes
-    o = result.objects
-    objects = None if o is None else ObjectsBake(o.shapes, o.sizes, o.positions, o.rotations)
-    return Bake(np.arange(scene.frame_count) / scene.fps, trees, meta, objects, timing)
+    return meta
+
+
+def objects_bake(tracks) -> ObjectsBake | None:
+    """The projectiles' bake from their tracks (sim.common.ProjectileTracks)."""
+    if tracks is None:
+        return None
+    return ObjectsBake(tracks.shapes, tracks.sizes, tracks.positions, tracks.rotations)
 
 
 def segment_transforms(rig, quats: np.ndarray | None, pivots: np.ndarray | None):
@@ -259,151 +270,3 @@ def tree_bake_from_model(model, positions: np.ndarray, rotations: np.ndarray,
         paths=model.segment_paths(),
         positions=positions.astype(np.float32), rotations=rotations.astype(np.float32),
         info=info, extra_times=np.zeros(0))
-
-
-# ---------------------------------------------------------------------------
-# files
-
-_FIXED_TIME = (1980, 1, 1, 0, 0, 0)
-
-
-def _add(zf: zipfile.ZipFile, name: str, array: np.ndarray) -> None:
-    buf = io.BytesIO()
-    np.lib.format.write_array(buf, np.ascontiguousarray(array), allow_pickle=False)
-    info = zipfile.ZipInfo(name + ".npy", date_time=_FIXED_TIME)
-    info.compress_type = zipfile.ZIP_DEFLATED
-    info.external_attr = 0o644 << 16
-    # deflate's fastest level: on a spruce's bake it writes 0.14 % more bytes
-    # than the default level 6 in 0.65x its CPU time (motion compresses little)
-    zf.writestr(info, buf.getvalue(), compresslevel=1)
-
-
-def _json_array(obj) -> np.ndarray:
-    return np.frombuffer(json.dumps(obj, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-
-
-def save_bake(bake: Bake, path: str | Path) -> Path:
-    """Write `bake` atomically; identical bakes give identical bytes."""
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w",
-                                                   compression=zipfile.ZIP_DEFLATED) as zf:
-        meta = dict(bake.meta, format_version=FORMAT_VERSION, trees=len(bake.trees))
-        _add(zf, "meta", _json_array(meta))
-        _add(zf, "times", bake.times.astype(np.float64))
-        for i, t in enumerate(bake.trees):
-            p = f"tree{i}."
-            _add(zf, p + "info", _json_array(dict(t.info, name=t.name, paths=t.paths)))
-            for key in ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width",
-                        "leaf", "leaf_size", "limb_parent", "limb_attach", "positions",
-                        "rotations"):
-                _add(zf, p + key, getattr(t, key))
-            if len(t.extra_times):  # only when present: bakes without them keep their bytes
-                t.check_extras(bake.times)
-                for key in _EXTRAS:
-                    _add(zf, p + key, getattr(t, key))
-            lengths = np.asarray([len(lp) for lp in t.limb_points], dtype=np.int64)
-            flat = np.concatenate(t.limb_points) if t.limb_points else np.zeros(0, np.int64)
-            _add(zf, p + "limb_point_counts", lengths)
-            _add(zf, p + "limb_points", flat)
-        if bake.objects is not None:
-            o = bake.objects
-            _add(zf, "objects.info", _json_array({"shapes": o.shapes}))
-            _add(zf, "objects.sizes", o.sizes)
-            _add(zf, "objects.positions", o.positions.astype(np.float32))
-            _add(zf, "objects.rotations", o.rotations.astype(np.float32))
-    return Path(path)
-
-
-def _json(data: np.ndarray):
-    return json.loads(bytes(data).decode("utf-8"))
-
-
-def load_bake(path: str | Path) -> Bake:
-    """Read a bake; anything that is not a whole treebake bake (empty,
-    truncated, another kind of file, damaged arrays) is an InputError."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: bake file not found")
-    if p.stat().st_size == 0:
-        raise InputError(f"{p}: the bake file is empty (0 bytes): an interrupted write or a "
-                         "damaged copy; bake it again")
-    if not zipfile.is_zipfile(p):
-        raise InputError(f"{p}: not a treebake bake (a bake is a .npz zip archive written by "
-                         "`treebake bake`)")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            if "meta" not in z:
-                raise InputError(f"{p}: a .npz archive, but not a treebake bake (no meta)")
-            meta = _json(z["meta"])
-            if meta.get("format_version") != FORMAT_VERSION:
-                raise InputError(f"{p}: bake format {meta.get('format_version')} is not "
-                                 f"supported (expected {FORMAT_VERSION})")
-            trees = []
-            for i in range(meta["trees"]):
-                pre = f"tree{i}."
-                info = _json(z[pre + "info"])
-                counts = z[pre + "limb_point_counts"]
-                flat = z[pre + "limb_points"]
-                splits = np.cumsum(counts)[:-1]
-                trees.append(TreeBake(
-                    name=info.pop("name"), paths=info.pop("paths"),
-                    limb_points=list(np.split(flat, splits)) if len(counts) else [],
-                    info=info,
-                    **{k: z[pre + k] for k in ("points", "seg_start", "seg_end", "seg_parent",
-                                                "seg_limb", "width", "leaf", "leaf_size",
-                                                "limb_parent", "limb_attach", "positions",
-                                                "rotations")},
-                    **{k: z[pre + k] for k in _EXTRAS if pre + k in z}))
-            objects = None
-            if "objects.info" in z:
-                objects = ObjectsBake(_json(z["objects.info"])["shapes"], z["objects.sizes"],
-                                      z["objects.positions"], z["objects.rotations"])
-            bake = Bake(z["times"], trees, meta, objects)
-            _check_shapes(bake)
-    except InputError:
-        raise
-    except (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError, ValueError, TypeError,
-            IndexError, AttributeError) as exc:
-        raise InputError(f"{p}: not a readable treebake bake: damaged or truncated "
-                         f"({type(exc).__name__}: {exc})") from None
-    check_finite(bake, str(p))
-    return bake
-
-
-def check_finite(bake: Bake, where: str = "the bake") -> None:
-    """Raise InputError if any tree's positions or rotations (frames and
-    sub-frame samples) hold NaN or infinity: junk to diff or export, named
-    with the tree and the first frame."""
-    for t in bake.trees:
-        for what, frames in (("positions", t.positions), ("rotations", t.rotations),
-                             ("sub-frame positions", t.extra_positions),
-                             ("sub-frame rotations", t.extra_rotations)):
-            if not len(frames):
-                continue
-            bad = ~np.isfinite(frames).reshape(len(frames), -1).all(axis=1)
-            if bad.any():
-                raise InputError(f"{where}: tree {t.name!r} has non-finite {what} from "
-                                 f"{'sample' if 'sub' in what else 'frame'} "
-                                 f"{int(np.argmax(bad))} on: a broken bake")
-
-
-def _check_shapes(bake: Bake) -> None:
-    """Arrays that disagree with each other (a damaged file) raise ValueError."""
-    frames = len(bake.times)
-    for t in bake.trees:
-        s = t.n_segments
-        if t.positions.shape not in ((frames, s, 3), (1, s, 3)) or \
-                t.rotations.shape != t.positions.shape[:2] + (4,):
-            raise ValueError(f"tree {t.name!r}: positions {t.positions.shape} and rotations "
-                             f"{t.rotations.shape} do not fit {frames} frames x {s} segments")
-        for key in ("seg_end", "seg_parent", "seg_limb", "width", "leaf", "leaf_size"):
-            if getattr(t, key).shape != (s,):
-                raise ValueError(f"tree {t.name!r}: {key} has shape {getattr(t, key).shape}, "
-                                 f"expected ({s},)")
-        if len(t.paths) != s:
-            raise ValueError(f"tree {t.name!r}: {len(t.paths)} paths for {s} segments")
-        if s and (t.seg_start.max() >= len(t.points) or t.seg_end.max() >= len(t.points)):
-            raise ValueError(f"tree {t.name!r}: a segment points past its {len(t.points)} points")
-        try:  # the extra sub-frame samples, when present, keep their contract too
-            t.check_extras(bake.times)
-        except InputError as exc:
-            raise ValueError(str(exc)) from None

@@ -154,7 +154,6 @@ BUSY = "another run holds its folder and is writing it"
 
 def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult:
     """Bake and export one job into `out/<name>/`; never raises."""
-    from .bake import save_bake
     from .export import ExportOptions, export_bake
     from .pipeline import bake_scene
 
@@ -174,9 +173,10 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             if progress is not None:
                 def tick(done, total, name=job.name):
                     progress(name, done, total)
+            bake_path = folder / f"{job.name}.npz"
             bake = bake_scene(scene, solver=job.solver, progress=tick,
-                              budget=Budget(folder=folder))
-            bake_path = save_bake(bake, folder / f"{job.name}.npz")
+                              budget=Budget(folder=folder), path=bake_path,
+                              scheduler=job.scheduler)
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]
             if exports:

@@ -18,7 +18,7 @@ from .errors import InputError, SceneError
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 QUALITY_NAMES = ("draft", "default", "final")
 JOB_KEYS = {"name", "scene", "grammar", "seed", "seeds", "quality", "formats", "duration", "fps",
-            "wind", "solver"}
+            "wind", "solver", "scheduler"}
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,9 @@ class Job:
     fps: float | None = None
     wind: float | None = None  # m/s at 10 m
     solver: str = "planar"
+    # a Dask scheduler (tcp://HOST:PORT) whose workers simulate the job's
+    # chunks; not an input: the bake is the same wherever its chunks ran
+    scheduler: str | None = None
 
     def inputs(self) -> list[Path]:
         """Every file the job reads: the scene, its grammars, the grammar."""
@@ -55,8 +58,8 @@ class Job:
         the bake's `scene_hash` (so a bake's bytes do not depend on the code
         that made it beyond its motion)."""
         h = hashlib.sha256(f"treebake {__version__}\n".encode())
-        h.update(json.dumps({k: v for k, v in asdict(self).items() if k != "name"},
-                            sort_keys=True).encode())
+        h.update(json.dumps({k: v for k, v in asdict(self).items()
+                             if k not in ("name", "scheduler")}, sort_keys=True).encode())
         for path in self.inputs():
             h.update(path.name.encode())
             h.update(path.read_bytes())
@@ -121,6 +124,14 @@ def _job(file: str, base: Path, raw: dict, key: str, defaults: dict) -> list[Job
     solver = data.get("solver", "planar")
     if solver not in ("planar", "full"):
         raise _fail(file, f"{key}.solver", f"= {solver!r} is not one of: planar, full")
+    scheduler = data.get("scheduler")
+    if scheduler is not None:
+        if not isinstance(scheduler, str) or "://" not in scheduler:
+            raise _fail(file, f"{key}.scheduler", f"= {scheduler!r} is not a Dask scheduler "
+                                                  "address (tcp://HOST:PORT)")
+        if solver == "full":
+            raise _fail(file, f"{key}.scheduler", "spreads the planar LOD's chunks; solver = "
+                                                  "\"full\" simulates the scene as one model")
     numbers = {}
     for k, lo, hi in (("duration", 0.0, 3600.0), ("fps", 1.0, 1000.0), ("wind", 0.0, 120.0)):
         if k in data:
@@ -137,7 +148,7 @@ def _job(file: str, base: Path, raw: dict, key: str, defaults: dict) -> list[Job
         suffix = f"-s{seed}" if len(seeds) > 1 else ""
         jobs.append(Job(name + suffix, scene, grammar, seed, quality, tuple(formats),
                         numbers.get("duration"), numbers.get("fps"), numbers.get("wind"),
-                        solver))
+                        solver, scheduler))
     return jobs
 
 
@@ -170,7 +181,7 @@ def load_jobs(path: str | Path) -> list[Job]:
     for i, prod in enumerate(_tables(file, raw, "product")):
         key = f"product[{i}]"
         allowed = {"grammars", "scenes", "seeds", "quality", "formats", "duration", "fps",
-                   "solver"}
+                   "solver", "scheduler"}
         for k in prod:
             if k not in allowed:
                 raise _fail(file, f"{key}.{k}",

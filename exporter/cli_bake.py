@@ -60,7 +60,7 @@ def job_name(name: str) -> str:
 def cmd_bake(args) -> int:
     import os
 
-    from .bake import save_bake
+    from .bake_file import tree_field
     from .export import check_options
     from .fileio import job_lock
     from .pipeline import bake_scene
@@ -98,17 +98,21 @@ def cmd_bake(args) -> int:
         opts = export_options(args, allow_none=True)
         check_options(opts)
     with job_lock(out):  # proves the folder writable; one run per job folder at a time
+        path = out / f"{out.name}.npz"
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
                           workers=workers, timestep=timestep, budget=budget,
-                          scheduler=args.scheduler)
-        path = save_bake(bake, out / f"{out.name}.npz")
+                          scheduler=args.scheduler, path=path)
         exported = None
         if opts is not None and opts.formats:
             exported = run_export(bake, path, args.out, out.name, opts, args)
     t = bake.timing
+    # from each tree's smallest entries: the bake is not read again
+    sizes = [(len(tree_field(bake.trees, i, "seg_start")),
+              "static" in tree_field(bake.trees, i, "info_dict"))
+             for i in range(len(bake.trees))]
     summary = {"bake": str(path), "trees": len(bake.trees),
-               "simulated": sum(1 for tb in bake.trees if not tb.static),
-               "segments": sum(tb.n_segments for tb in bake.trees),
+               "simulated": sum(1 for _, static in sizes if not static),
+               "segments": sum(n for n, _ in sizes),
                "frames": len(bake.times), "notes": bake.meta.get("notes", []),
                "wall_seconds": t.get("wall_seconds")}
     if exported is not None:
@@ -146,7 +150,8 @@ def export_options(args, allow_none: bool = False):
                              angle_tolerance=math.radians(args.angle_tolerance),
                              enabled=not args.no_reduce),
         split=args.split, obj_stride=args.stride, preview_size=args.size,
-        frame_start=args.frame_start, textures=not args.no_textures)
+        frame_start=args.frame_start, textures=not args.no_textures,
+        trees_per_file=args.trees_per_file, usd_layers=args.usd_layers)
 
 
 def run_export(bake, bake_path, out, name, opts, args):
@@ -214,7 +219,7 @@ def print_export(report) -> None:
 
 
 def cmd_export(args) -> int:
-    from .bake import load_bake
+    from .bake_file import load_bake
     from .export import check_options
     from .fileio import job_lock
 
@@ -223,7 +228,7 @@ def cmd_export(args) -> int:
         raise InputError(f"{path}: bake file not found")
     opts = export_options(args)
     check_options(opts)
-    bake = load_bake(path)
+    bake = load_bake(path, lazy=True)  # the writers read a tree at a time
     name = job_name(args.name or str(bake.meta.get("scene") or "bake"))
     with job_lock(Path(args.out) / name):
         report = run_export(bake, path, args.out, name, opts, args)
@@ -235,7 +240,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_preview(args) -> int:
-    from .bake import load_bake
+    from .bake_file import load_bake
     from .export import write_previews
 
     path = Path(args.bake)

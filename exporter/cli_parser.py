@@ -99,6 +99,12 @@ GRAMMAR_OPTIONS = (
 
 EXPORT_OPTIONS = Group("export options", (
     opt("--split", action="store_true", help="glTF: one file per tree"),
+    opt("--trees-per-file", type=int, default=None,
+        help="glTF: at most N trees a file, NAME.part0001.glb, ... (default: one file up to "
+             "250 trees, files of 250 beyond)"),
+    opt("--usd-layers", choices=("auto", "one", "tree"), default="auto",
+        help="USD: one file, or a root stage that loads a layer per tree as a payload "
+             "(NAME.trees/TREE.usd); default auto: per tree past 100 trees"),
     opt("--no-leaves", action="store_true", help="no leaf quads"),
     opt("--no-textures", action="store_true",
         help="plain colour materials instead of the generated bark and leaf textures"),

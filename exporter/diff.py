@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .bake import Bake, TreeBake, load_bake
+from .bake import Bake, TreeBake
+
+from .bake_file import load_bake
 from .errors import InputError
 from .rotations import angle_between
 from .sway import segment_ends

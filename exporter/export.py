@@ -9,15 +9,16 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from . import __version__
-from .bake import FAST_TURN_DEG, Bake, check_finite
+from .bake import FAST_TURN_DEG, Bake
+from .bake_file import StoredTrees, check_finite, tree_field
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
-from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, tree_mesh
+from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, part_materials_of, tree_mesh
 from .fileio import atomic_path, write_bytes, write_text
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
@@ -30,6 +31,10 @@ Progress = Callable[[str, int, int], None]  # (stage, done, total)
 @dataclass(frozen=True)
 class ExportOptions:
     """formats: any of FORMATS; split: one glTF file per tree;
+    trees_per_file: glTF files of at most that many trees (None: one file
+    up to GLTF_TREES_PER_FILE trees, files of that many beyond); usd_layers:
+    "one" file, or a root stage with a payload layer per "tree" ("auto":
+    per tree past USD_LAYER_TREES trees);
     obj_stride: write every n-th frame of OBJ sequences; preview_size: px
     per view panel; frame_start: the number of the bake's first frame in
     every format (None: the bake's, from its scene; default 1); textures:
@@ -43,6 +48,16 @@ class ExportOptions:
     preview_size: int = 256
     frame_start: int | None = None
     textures: bool = True
+    trees_per_file: int | None = None  # glTF: at most this many trees a file (None: auto)
+    usd_layers: str = "auto"  # "one" file, a layer per "tree", or "auto"
+
+
+# a shot of more trees is written as glTF files of this many trees and as a
+# USD root stage with a payload layer per tree: an export holds one file's
+# trees, a DCC opens the stage at once (set per export: --trees-per-file,
+# --usd-layers)
+GLTF_TREES_PER_FILE = 250
+USD_LAYER_TREES = 100
 
 
 @dataclass
@@ -85,6 +100,10 @@ def check_options(opts: ExportOptions) -> None:
                          f"{math.degrees(r.angle_tolerance)}")
     if not 64 <= opts.preview_size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {opts.preview_size}")
+    if opts.trees_per_file is not None and opts.trees_per_file < 1:
+        raise InputError(f"--trees-per-file must be >= 1, got {opts.trees_per_file}")
+    if opts.usd_layers not in ("auto", "one", "tree"):
+        raise InputError(f"--usd-layers must be auto, one or tree, got {opts.usd_layers!r}")
     if opts.frame_start is not None and not 0 <= opts.frame_start <= MAX_FRAME_START:
         raise InputError(f"--frame-start must be in 0..{MAX_FRAME_START}, got "
                          f"{opts.frame_start}")
@@ -109,23 +128,81 @@ def sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+# the manifest's first keys, in this order; the writers' own follow
+_MANIFEST_ORDER = ("tool", "job", "inputs", "settings", "frames", "sizes")
+
+
+@dataclass(frozen=True)
+class TreeFacts:
+    """What the manifest says of one tree, noted when its mesh is built."""
+
+    inputs: dict  # name, grammar, its hash, seed, segments, static
+    segments: int
+    static: bool
+    extra_samples: int
+    leaf_quads: int
+    vertices: int
+    triangles: int
+    broken_joints: int
+
+
+class TreeMeshes(Sequence[TreeMesh]):
+    """Every tree's mesh (exchange.mesh.tree_mesh), built when a writer asks
+    for it (the last one kept), so an export holds one tree's mesh, not the
+    shot's; what the manifest says of each tree is noted as it is built."""
+
+    def __init__(self, bake: Bake, opts: MeshOptions):
+        self.bake, self.opts = bake, opts
+        self.facts: dict[int, TreeFacts] = {}
+        self._last: tuple[int, TreeMesh] | None = None
+
+    def __len__(self) -> int:
+        return len(self.bake.trees)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        i = range(len(self))[i]
+        if self._last is None or self._last[0] != i:
+            tree = self.bake.trees[i]
+            broken = broken_joints(tree)
+            mesh = tree_mesh(tree, self.opts, broken)
+            self.facts[i] = TreeFacts(
+                {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
+                 "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
+                 "segments": tree.n_segments, "static": tree.static},
+                tree.n_segments, tree.static, len(tree.extra_times),
+                2 * int((tree.leaf > 0).sum()) if self.opts.leaves else 0,
+                mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
+            self._last = (i, mesh)
+        return self._last[1]
+
+    def __iter__(self) -> Iterator[TreeMesh]:
+        for i in range(len(self)):
+            yield self[i]
+
+    def all_facts(self) -> list[TreeFacts]:
+        """Every tree's facts, in order (building the meshes no writer
+        asked for)."""
+        for i in range(len(self)):
+            if i not in self.facts:
+                self[i]
+        return [self.facts[i] for i in range(len(self))]
+
+
 def build_meshes(bake: Bake, opts: MeshOptions) -> tuple[list[TreeMesh], int]:
-    """Every tree's mesh, and how many joints broke (split in the mesh)."""
-    meshes, broken = [], 0
-    for t in bake.trees:
-        b = broken_joints(t)
-        broken += int(b.sum())
-        meshes.append(tree_mesh(t, opts, b))
-    return meshes, broken
+    """Every tree's mesh at once, and how many joints broke (split in the
+    mesh): for scripts and checks; exports build them one at a time."""
+    meshes = TreeMeshes(bake, opts)
+    built = list(meshes)
+    return built, sum(f.broken_joints for f in meshes.all_facts())
 
 
-def _inputs(bake: Bake, bake_path: Path | None) -> dict:
+def _inputs(bake: Bake, bake_path: Path | None, facts: list[TreeFacts]) -> dict:
     meta = bake.meta
     out = {"bake": None, "scene": meta.get("scene"), "scene_hash": meta.get("scene_hash"),
            "baked_by": meta.get("tool"), "solver": meta.get("solver"), "seed": meta.get("seed"),
-           "trees": [{"name": t.name, "grammar": Path(str(t.info.get("grammar", ""))).name,
-                      "grammar_hash": t.info.get("grammar_hash"), "seed": t.info.get("seed"),
-                      "segments": t.n_segments, "static": t.static} for t in bake.trees]}
+           "trees": [f.inputs for f in facts]}
     if bake_path is not None:
         out["bake"] = {"file": bake_path.name, "sha256": sha256(bake_path),
                        "bytes": bake_path.stat().st_size}
@@ -143,7 +220,8 @@ def _settings(opts: ExportOptions) -> dict:
             "leaves": m.leaves, "min_radius_m": m.min_radius, "bark_tile_m": m.bark_tile,
             "keyframe_reduction": r.enabled, "position_tolerance_m": r.position_tolerance,
             "angle_tolerance_deg": round(math.degrees(r.angle_tolerance), 9),
-            "split": opts.split, "obj_stride": opts.obj_stride,
+            "split": opts.split, "trees_per_file": opts.trees_per_file,
+            "usd_layers": opts.usd_layers, "obj_stride": opts.obj_stride,
             "frame_start": opts.frame_start, "textures": opts.textures,
             "preview_size_px": opts.preview_size, "up_axis": "Y", "units": "m"}
 
@@ -160,14 +238,18 @@ def _rounded(report: dict) -> dict:
     return out
 
 
-def _textures(meshes: list[TreeMesh], opts: ExportOptions) -> dict:
-    """Material name -> its generated Texture (None: a plain colour)."""
+def _textures(bake: Bake, opts: ExportOptions) -> dict:
+    """Material name -> its generated Texture (None: a plain colour), for
+    the materials of every tree's parts (read from the trees' leaf types
+    alone: no mesh is built)."""
     if not opts.textures:
         return {}
     from .exchange.textures import texture_for
 
-    names = sorted({p.material for m in meshes for p in m.parts})
-    return {n: texture_for(n) for n in names}
+    names = set()
+    for i in range(len(bake.trees)):
+        names.update(part_materials_of(tree_field(bake.trees, i, "leaf"), opts.mesh))
+    return {n: texture_for(n) for n in sorted(names)}
 
 
 @dataclass(frozen=True)
@@ -198,32 +280,20 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         raise InputError("no export format given")
     if not bake.trees:
         raise InputError("the bake has no trees")
-    check_finite(bake)  # never a file full of NaN
+    if not isinstance(bake.trees, StoredTrees):  # a stored tree is checked as it is read
+        check_finite(bake)  # never a file full of NaN
     name = name or str(bake.meta.get("scene") or "bake")
     if not name or any(c in name for c in "/\\") or name in (".", ".."):
         raise InputError(f"job name {name!r} cannot be a folder name")
     folder = Path(out) / name
     bake_path = Path(bake_path) if bake_path is not None else None
     tick = progress or (lambda stage, done, total: None)
-    meshes, broken = build_meshes(bake, opts.mesh)
+    meshes = TreeMeshes(bake, opts.mesh)
     manifest: dict = {"tool": f"treebake {__version__}", "job": name,
-                      "inputs": _inputs(bake, bake_path), "settings": _settings(opts)}
+                      "settings": _settings(opts), "frames": {}}
     n = len(bake.times)
     first = frame_start(bake, opts)
-    manifest["frames"] = {"count": n, "fps": bake.fps, "first": first, "last": first + n - 1,
-                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1]),
-                          "gltf_start_s": first / bake.fps,
-                          "extra_samples": sum(len(t.extra_times) for t in bake.trees)}
-    manifest["sizes"] = {
-        "trees": len(bake.trees), "animated_trees": sum(not t.static for t in bake.trees),
-        "segments": sum(t.n_segments for t in bake.trees),
-        "joints": sum(t.n_segments for t in bake.trees if not t.static),
-        "broken_joints": broken, "vertices": sum(m.n_vertices for m in meshes),
-        "triangles": sum(m.n_triangles for m in meshes),
-        "leaf_quads": sum(2 * int((t.leaf > 0).sum()) for t in bake.trees)
-        if opts.mesh.leaves else 0,
-        "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
-    textures = _textures(meshes, opts)
+    textures = _textures(bake, opts)
     maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
     job = _Job(bake, meshes, folder, name, opts, first, textures, maps, tick)
     files = _write_texture_pngs(job)
@@ -234,6 +304,23 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     if "preview" in opts.formats:
         files += write_previews(bake, folder, name, opts.preview_size,
                                 progress=lambda d, t: tick("preview", d, t))
+    facts = meshes.all_facts()
+    manifest["inputs"] = _inputs(bake, bake_path, facts)
+    manifest["frames"] = {"count": n, "fps": bake.fps, "first": first, "last": first + n - 1,
+                          "start_s": float(bake.times[0]), "end_s": float(bake.times[-1]),
+                          "gltf_start_s": first / bake.fps,
+                          "extra_samples": sum(f.extra_samples for f in facts),
+                          **manifest["frames"]}
+    manifest["sizes"] = {
+        "trees": len(facts), "animated_trees": sum(not f.static for f in facts),
+        "segments": sum(f.segments for f in facts),
+        "joints": sum(f.segments for f in facts if not f.static),
+        "broken_joints": sum(f.broken_joints for f in facts),
+        "vertices": sum(f.vertices for f in facts),
+        "triangles": sum(f.triangles for f in facts),
+        "leaf_quads": sum(f.leaf_quads for f in facts),
+        "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
+    manifest = {k: manifest[k] for k in _MANIFEST_ORDER if k in manifest} | manifest
     root = folder.resolve()
     manifest["files"] = sorted(
         ({"path": p.resolve().relative_to(root).as_posix(), "bytes": p.stat().st_size,
@@ -264,9 +351,12 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
             from .exchange.gltf import export_gltf
 
             job.tick(fmt, 0, 1)
+            per_file = opts.trees_per_file
+            if per_file is None and len(job.bake.trees) > GLTF_TREES_PER_FILE:
+                per_file = GLTF_TREES_PER_FILE
             res = export_gltf(job.bake, job.meshes, job.folder, job.name, binary=fmt == "glb",
                               split=opts.split, opts=opts.reduce, frame_start=job.first,
-                              textures=job.textures)
+                              textures=job.textures, trees_per_file=per_file)
             files += res.files
             manifest["animation"] = _rounded(res.animation)
             manifest["animation"]["tolerances"] = {
@@ -282,7 +372,10 @@ def _write_obj(job: _Job, manifest: dict) -> list[Path]:
         return []
     from .exchange.obj import export_obj
 
-    res = export_obj(job.bake, job.meshes, job.folder / "obj", job.name, job.opts.obj_stride,
+    # every frame file holds every tree: the OBJ sequence reads the whole
+    # shot into memory (glb and USD write tree by tree)
+    bake = replace(job.bake, trees=list(job.bake.trees))
+    res = export_obj(bake, list(job.meshes), job.folder / "obj", job.name, job.opts.obj_stride,
                      progress=lambda d, t: job.tick("obj", d, t), frame_start=job.first,
                      maps=job.maps)
     manifest["frames"]["obj"] = {"stride": job.opts.obj_stride, "files": len(res.frames),
@@ -298,9 +391,12 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
         if fmt in job.opts.formats:
             from .exchange.usd import export_usd
 
+            layers = job.opts.usd_layers
+            if layers == "auto":
+                layers = "tree" if len(job.bake.trees) > USD_LAYER_TREES else "one"
             res = export_usd(job.bake, job.meshes, job.folder, job.name, ascii=fmt == "usda",
                              progress=lambda d, t, f=fmt: job.tick(f, d, t),
-                             frame_start=job.first, maps=job.maps)
+                             frame_start=job.first, maps=job.maps, layers=layers)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))
@@ -308,7 +404,8 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
             manifest["usd"] = {"time_codes": list(res.time_codes), "joints": res.joints,
                                "subframe_codes": res.subframe_codes,
                                "subframe_turn_deg": FAST_TURN_DEG,
-                               "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0}
+                               "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0,
+                               "layers": layers, "tree_layers_validated": res.layers_checked}
     return files
 
 

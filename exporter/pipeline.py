@@ -4,23 +4,28 @@ and benchmarks call `bake_scene`; each stage's work is in its own module
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import replace
+from pathlib import Path
 
-from .bake import Bake, bake_from
+import numpy as np
+
+from .bake import Bake, TreeBake, bake_meta, moved_tree_bake, objects_bake, static_tree_bake
+from .bake_file import BakeWriter, load_bake
 from .grow import grow
 from .quality import Quality
 from .resources import Budget, check, estimate
 from .scene import Scene
 from .sim.rigging import rig_scene
-from .sim.run import simulate, solver_kind
+from .sim.run import segments_held, simulate, solver_kind
 from .sim.solver import SolveResult
 
 
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
                log=None, progress=None, workers: int = 1,
                timestep: float | None = None, budget: Budget | None = None,
-               scheduler: str | None = None) -> Bake:
+               scheduler: str | None = None, path: str | Path | None = None) -> Bake:
     """Grow, rig, simulate and bake a scene. `solver`: "planar" (the planar
     LOD) or "full" (the MuJoCo reference); `quality` overrides the scene's
     (and every tree's); `log(text)` hears what people should; `progress
@@ -31,25 +36,71 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     bake that would not fit is refused (InputError) before it simulates;
     `scheduler` a Dask scheduler's address (tcp://HOST:PORT) whose workers
     simulate the planar LOD's chunks instead of local processes.
-    Deterministic: the same inputs and versions give the same bake,
-    whatever `workers`."""
+    `path`: write the bake there (bake_file.py) tree by tree as the
+    simulation finishes them, and return it read lazily from the file:
+    memory follows the chunk, not the shot. Without it the Bake is in
+    memory. Deterministic: the same inputs and versions give the same bake
+    (and the same bytes, saved or streamed), whatever `workers`."""
     started = time.perf_counter()
     kind = solver_kind(solver)  # before any work: a bake never switches engines silently
     scene = scene if quality is None else replace(scene, quality=quality)
     budget = budget or Budget()
     grown = grow(scene, budget)
     rigged = rig_scene(scene, grown, quality, log)
-    need = estimate(sum(t.rig.model.n_segments for t in rigged.trees if t.active),
-                    sum(t.rig.model.n_segments for t in rigged.trees if not t.active),
-                    scene.frame_count, workers)
+    animated = sum(t.rig.model.n_segments for t in rigged.trees if t.active)
+    need = estimate(animated, sum(t.rig.model.n_segments for t in rigged.trees if not t.active),
+                    scene.frame_count, workers,
+                    None if path is None else segments_held(kind, scene, workers))
     if log:
         log(need.line())
     check(need, budget)
     timing: dict = {"grow_seconds": round(time.perf_counter() - started, 3)}
-    result = SolveResult({})
-    if any(t.active for t in rigged.trees):
-        result = simulate(kind, rigged, scene, workers, timestep, log, progress, scheduler)
-        timing.update(result.timing)
-    bake = bake_from(scene, kind, grown, rigged, result, timing)
-    bake.timing["wall_seconds"] = round(time.perf_counter() - started, 3)
+    times = np.arange(scene.frame_count) / scene.fps
+    with contextlib.ExitStack() as stack:
+        if path is None:
+            store = TreeStore(len(grown))
+        else:
+            store = stack.enter_context(BakeWriter(path, times, len(grown)))
+        for i, (g, t) in enumerate(zip(grown, rigged.trees)):
+            if not t.active:
+                store.add(i, static_tree_bake(g, t.rig, rigged.static.get(t.name,
+                                                                          "not simulated")))
+
+        def take(i: int, motion, engines: str) -> None:
+            store.add(i, moved_tree_bake(grown[i], rigged.trees[i].rig, motion, engines))
+
+        result = SolveResult({})
+        if any(t.active for t in rigged.trees):
+            result = simulate(kind, rigged, scene, workers, timestep, log, progress, scheduler,
+                              on_tree=take)
+            timing.update(result.timing)
+        meta, objects = bake_meta(scene, kind, rigged, result), objects_bake(result.objects)
+        store.finish(meta, objects)
+    if path is None:
+        bake = Bake(times, store.trees, meta, objects, order=store.order)
+    else:
+        bake = load_bake(path, lazy=True)
+    bake.timing = dict(timing, wall_seconds=round(time.perf_counter() - started, 3))
     return bake
+
+
+class TreeStore:
+    """The trees of an in-memory bake as they come (bake_file.BakeWriter's
+    interface): every tree once, in any order."""
+
+    def __init__(self, trees: int):
+        self.order: list[int] = []
+        self._trees: dict[int, TreeBake] = {}
+        self.count = trees
+
+    def add(self, index: int, tree: TreeBake) -> None:
+        self._trees[index] = tree
+        self.order.append(index)
+
+    def finish(self, meta: dict, objects) -> None:
+        if len(self._trees) != self.count:
+            raise ValueError(f"{self.count - len(self._trees)} trees were never simulated")
+
+    @property
+    def trees(self) -> list[TreeBake]:
+        return [self._trees[i] for i in range(self.count)]

@@ -93,13 +93,17 @@ def check_segments(grammar_file: str | Path, segments: int, budget: Budget) -> N
             "`iterations` make it smaller, and `--max-segments` raises the cap")
 
 
-def estimate(animated: int, static: int, frames: int, workers: int) -> Estimate:
+def estimate(animated: int, static: int, frames: int, workers: int,
+             held: int | None = None) -> Estimate:
     """The needs of a bake of `animated` and `static` segments (a static
-    tree is baked as one frame) over `frames`, in `workers` processes."""
+    tree is baked as one frame) over `frames`, in `workers` processes, of
+    which `held` animated segments have their frames in memory at once (a
+    bake streamed to its file holds a few chunks; None: all of them)."""
     seg_frames = animated * frames + static
+    held = animated if held is None else min(held, animated)
     memory = (BASE_MEMORY + (max(workers, 1) - 1) * WORKER_MEMORY
               + (animated + static) * MEMORY_PER_SEGMENT
-              + seg_frames * MEMORY_PER_SEGMENT_FRAME)
+              + (held * frames + static) * MEMORY_PER_SEGMENT_FRAME)
     return Estimate(animated, static, frames, workers, memory,
                     seg_frames * DISK_PER_SEGMENT_FRAME)
 

@@ -19,7 +19,7 @@ BEAUFORT = {  # m/s, lower bounds (WMO)
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview", "npz")
 LEVELS = tuple(QUALITIES)
 SEED_MAX = 2**63 - 1
-MAX_TREES = 5000
+MAX_TREES = 100_000  # a shot; its memory and disk are checked before the work (resources.py)
 NEVER = "never"
 
 TOP = table(

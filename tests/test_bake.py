@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from treebake.bake import load_bake, save_bake
+from treebake.bake_file import load_bake, save_bake
 from treebake.cli import main
 from treebake.errors import InputError
 from treebake.pipeline import bake_scene

@@ -4,7 +4,7 @@ processes gives the same bake, byte for byte."""
 
 import numpy as np
 import pytest
-from treebake.bake import load_bake, save_bake
+from treebake.bake_file import load_bake, save_bake
 from treebake.culling import cull, half_angle
 from treebake.pipeline import bake_scene
 from treebake.scene import CameraSpec, parse_scene

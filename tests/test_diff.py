@@ -5,7 +5,7 @@ import copy
 
 import numpy as np
 import pytest
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.cli import main
 from treebake.diff import TopologyError, diff_bakes, format_report
 from treebake.pipeline import bake_scene

@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 import abcread
 from bakes import preset_bake
 from conftest import ROOT, need
-from treebake.bake import load_bake
+from treebake.bake_file import load_bake
 from treebake.exchange.mesh import pose
 from treebake.export import ExportOptions, export_bake
 from treebake.names import joint_names

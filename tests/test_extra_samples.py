@@ -17,7 +17,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from conftest import need
 from gltfread import Gltf, quat_to_matrix
-from treebake.bake import Bake, TreeBake, load_bake, save_bake
+from treebake.bake import Bake, TreeBake
+from treebake.bake_file import load_bake, save_bake
 from treebake.diff import diff_bakes
 from treebake.errors import InputError
 from treebake.export import ExportOptions, export_bake

@@ -13,7 +13,7 @@ import numpy as np
 import pygltflib
 import pytest
 import treebake
-from treebake.bake import load_bake
+from treebake.bake_file import load_bake
 from treebake.export import ExportOptions, export_bake
 
 BAKE = Path(treebake.__file__).resolve().parents[1] / "tests" / "golden" / "sapling-box.npz"

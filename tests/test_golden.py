@@ -7,7 +7,7 @@ import sys
 
 import pytest
 from conftest import ROOT
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.cli import main
 from treebake.pipeline import bake_scene
 

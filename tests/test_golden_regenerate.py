@@ -11,7 +11,7 @@ import regenerate  # noqa: E402
 
 
 def test_regenerate_shows_the_diff_and_asks_before_replacing(tmp_path, monkeypatch, capsys):
-    from treebake.bake import load_bake, save_bake
+    from treebake.bake_file import load_bake, save_bake
 
     monkeypatch.setattr(regenerate, "HERE", tmp_path)
     assert regenerate.regenerate("sapling-box", assume_yes=False) == "new"

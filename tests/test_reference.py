@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from simkit import BARE, bake_text, tip
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.errors import SimulationError
 from treebake.lsystem import derive, load_grammar
 from treebake.pipeline import bake_scene

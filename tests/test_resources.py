@@ -10,7 +10,7 @@ import zipfile
 
 import pytest
 from treebake import resources
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.errors import InputError, OutputError
 from treebake.pipeline import bake_scene
 from treebake.resources import Budget, estimate, parse_size

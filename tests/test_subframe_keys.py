@@ -16,7 +16,7 @@ import numpy as np
 import pygltflib
 import pytest
 import treebake
-from treebake.bake import load_bake
+from treebake.bake_file import load_bake
 from treebake.export import ExportOptions, export_bake
 
 ROOT = Path(treebake.__file__).resolve().parents[1]

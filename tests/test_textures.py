@@ -118,7 +118,7 @@ def test_usd_preview_surfaces_read_the_texture_files(demo):
 
 def test_no_textures_flag(tmp_path, capsys):
     bake = tmp_path / "b.npz"
-    from treebake.bake import save_bake
+    from treebake.bake_file import save_bake
 
     save_bake(preset_bake("calm"), bake)
     assert main(["export", str(bake), "--format", "obj", "--no-textures", "--out",

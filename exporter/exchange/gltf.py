@@ -25,7 +25,8 @@ from __future__ import annotations
 import json
 import math
 import struct
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -109,12 +110,9 @@ def _floats(values) -> list[float]:
 
 @dataclass
 class GltfResult:
-    """What was written: files, counts, keyframe-reduction report."""
+    """What was written: files and the keyframe-reduction report."""
 
     files: list[Path] = field(default_factory=list)
-    joints: int = 0
-    vertices: int = 0
-    triangles: int = 0
     animation: dict = field(default_factory=dict)
 
 
@@ -436,40 +434,48 @@ def write(path: str | Path, doc: _Document) -> list[Path]:
     return [write_bytes(path, header + chunks)]
 
 
-def export_gltf(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
+def export_gltf(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: str,
                 binary: bool = True, split: bool = False,
                 opts: ReduceOptions | None = None, frame_start: int = 1,
-                textures: dict[str, Texture | None] | None = None) -> GltfResult:
+                textures: dict[str, Texture | None] | None = None,
+                trees_per_file: int | None = None) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
-    `name.<tree>.glb`, and the projectiles in `name.objects.glb`. Bake
-    frame f (0-based) is keyed at (frame_start + f) / fps s. `textures`:
-    material name -> Texture to embed (textures.py); others stay plain."""
+    `name.<tree>.glb`, and the projectiles in `name.objects.glb`;
+    `trees_per_file` N: files of at most N trees, `name.part0001.glb`, ...
+    (the projectiles in the first). A file's trees are read into memory
+    while it is written, no more. Bake frame f (0-based) is keyed at
+    (frame_start + f) / fps s. `textures`: material name -> Texture to
+    embed (textures.py); others stay plain."""
     out = Path(out)
     opts = opts or ReduceOptions()
     ext = ".glb" if binary else ".gltf"
-    jobs: list[tuple[str, list[int], bool]]
+    count = len(bake.trees)
+    jobs: list[tuple[str, range, bool]]
     if split:
-        jobs = [(f"{name}.{t.name}", [i], False) for i, t in enumerate(bake.trees)]
+        jobs = [(f"{name}.{bake.trees[i].name}", range(i, i + 1), False) for i in range(count)]
         if bake.objects is not None and len(bake.objects.sizes):
-            jobs.append((f"{name}.objects", [], True))
+            jobs.append((f"{name}.objects", range(0), True))
+    elif trees_per_file and count > trees_per_file:
+        starts = range(0, count, trees_per_file)
+        digits = max(4, len(str(len(starts))))
+        jobs = [(f"{name}.part{k + 1:0{digits}d}", range(a, min(a + trees_per_file, count)),
+                 k == 0) for k, a in enumerate(starts)]
     else:
-        jobs = [(name, list(range(len(bake.trees))), True)]
+        jobs = [(name, range(count), True)]
     result = GltfResult()
     reports = []
+    extra = 0
     for stem, trees, objects in jobs:
-        doc, parts = build(bake, stem, meshes, trees, objects, opts, frame_start, textures)
+        part = replace(bake, trees=[bake.trees[i] for i in trees])  # this file's trees, read once
+        doc, parts = build(part, stem, [meshes[i] for i in trees], list(range(len(trees))),
+                           objects, opts, frame_start, textures)
         result.files += write(out / f"{stem}{ext}", doc)
         reports += [p.anim.report for p in parts]
-    for i, m in enumerate(meshes):
-        result.vertices += m.n_vertices
-        result.triangles += m.n_triangles
-        if not bake.trees[i].static:
-            result.joints += bake.trees[i].n_segments
+        extra += sum(len(t.extra_times) for t in part.trees if not t.static)
     result.animation = merge_reports(reports)
     if result.animation:
         result.animation["frames"] = len(bake.times)
-        result.animation["extra_samples"] = sum(len(t.extra_times) for t in bake.trees
-                                                if not t.static)
+        result.animation["extra_samples"] = extra
         result.animation["subframe_turn_deg"] = FAST_TURN_DEG
         result.animation["errors_at"] = "frames"
     return result

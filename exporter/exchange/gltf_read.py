@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bake import Bake, TreeBake, check_finite
+from ..bake import Bake, TreeBake
+
+from ..bake_file import check_finite
 from ..errors import InputError
 from ..rotations import (
     apply,

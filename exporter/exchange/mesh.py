@@ -363,6 +363,19 @@ def _leaves(tree: TreeBake, segs: np.ndarray):
     return pos, nrm, uv, joints, weights, faces
 
 
+def leaf_material(kind: int) -> str:
+    """The material of leaf type `kind` (1, 2, ...): "leaf", "leaf2", ..."""
+    return "leaf" if kind == 1 else f"leaf{int(kind)}"
+
+
+def part_materials_of(leaf: np.ndarray, opts: MeshOptions = MeshOptions()) -> list[str]:
+    """The materials of the parts tree_mesh(tree, opts) makes for a tree
+    whose segments have leaf types `leaf` (TreeBake.leaf), without
+    building it."""
+    leaves = np.unique(leaf[leaf > 0]) if opts.leaves else []
+    return ["bark"] + [leaf_material(k) for k in leaves]
+
+
 def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
               broken: np.ndarray | None = None) -> TreeMesh:
     """Bark (material "bark") and leaves (one material per leaf type,
@@ -379,8 +392,7 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
         for kind in np.unique(tree.leaf[tree.leaf > 0]):
             segs = np.nonzero(tree.leaf == kind)[0]
             lp, ln, lu, lj, lw, lf = _leaves(tree, segs)
-            name = "leaf" if kind == 1 else f"leaf{int(kind)}"
-            parts.append(MeshPart(name, lf + offset, leaf_colour(kind), double_sided=True))
+            parts.append(MeshPart(leaf_material(kind), lf + offset, leaf_colour(kind), double_sided=True))
             arrays.append((lp, ln, lu, lj, lw))
             offset += len(lp)
     cat = [np.concatenate(x) for x in zip(*arrays)]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +51,7 @@ class UsdResult:
     time_codes: tuple[float, float] = (1.0, 1.0)
     subframe_codes: int = 0  # fractional time codes written, summed over skeletons
     validation_errors: list[str] = field(default_factory=list)
+    layers_checked: int = 0  # tree layers validated on their own ("tree" layers)
 
 
 def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
@@ -64,12 +65,14 @@ def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
 
 class _Writer:
     def __init__(self, bake: Bake, name: str, frame_start: int = 1,
-                 maps: dict[str, tuple[str, bool]] | None = None) -> None:
+                 maps: dict[str, tuple[str, bool]] | None = None,
+                 kind: str = "assembly") -> None:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
         self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
         self.bake = bake
-        self.stage = Usd.Stage.CreateInMemory()
+        # payloads (tree layers) are not loaded while the stage is written
+        self.stage = Usd.Stage.CreateInMemory(load=Usd.Stage.LoadNone)
         st = self.stage
         UsdGeom.SetStageUpAxis(st, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(st, 1.0)
@@ -82,7 +85,7 @@ class _Writer:
         self.root = f"/{self.ident(name)}"
         root = UsdGeom.Xform.Define(st, self.root)
         st.SetDefaultPrim(root.GetPrim())
-        Usd.ModelAPI(root.GetPrim()).SetKind("assembly")
+        Usd.ModelAPI(root.GetPrim()).SetKind(kind)
         self.materials: dict[str, object] = {}
         self.maps = maps or {}  # material -> (texture path relative to the file, cutout)
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
@@ -179,15 +182,17 @@ class _Writer:
                     Vt.FloatArray.FromNumpy(weights.ravel()))
                 b.CreateGeomBindTransformAttr(self.Gf.Matrix4d(1.0))
 
-    def tree(self, i: int, mesh: TreeMesh) -> int:
+    def tree(self, i: int, mesh: TreeMesh, path: str | None = None) -> int:
+        """Tree i at `path` (default: a child of the root named after it);
+        the joints written."""
         t = self.bake.trees[i]
-        if t.static:
+        if path is None:
             path = self.unique(self.root, t.name)
+        if t.static:
             self.UsdGeom.Xform.Define(self.stage, path)
             self.meshes(path, mesh, None)
             return 0
         Vt, Gf = self.Vt, self.Gf
-        path = self.unique(self.root, t.name)
         self.UsdSkel.Root.Define(self.stage, path)
         skel = self.UsdSkel.Skeleton.Define(self.stage, f"{path}/Skel")
         names = joint_names(t.name, t.paths)
@@ -264,12 +269,13 @@ class _Writer:
             return Path(target).read_bytes()
 
 
-def validate(path: str | Path) -> list[str]:
+def validate(path: str | Path, load: bool = True) -> list[str]:
     """Errors (not warnings) from every registered pxr.UsdValidation
-    validator, as "name: message" strings. Empty = valid."""
+    validator, as "name: message" strings. Empty = valid. `load`: with
+    every payload loaded (else the stage as a DCC first opens it)."""
     from pxr import Usd, UsdValidation
 
-    stage = Usd.Stage.Open(str(path))
+    stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll if load else Usd.Stage.LoadNone)
     reg = UsdValidation.ValidationRegistry()
     ctx = UsdValidation.ValidationContext(reg.GetOrLoadAllValidators())
     out = []
@@ -279,24 +285,59 @@ def validate(path: str | Path) -> list[str]:
     return sorted(out)
 
 
-def export_usd(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
+def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: str,
                ascii: bool = False, check: bool = True,
                progress: Callable[[int, int], None] | None = None,
                frame_start: int = 1,
-               maps: dict[str, tuple[str, bool]] | None = None) -> UsdResult:
+               maps: dict[str, tuple[str, bool]] | None = None,
+               layers: str = "one") -> UsdResult:
     """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
     frame f at time code frame_start + f; `maps`: material -> (texture
-    path relative to the file, cutout) for the preview surfaces."""
+    path relative to the file, cutout) for the preview surfaces.
+    `layers`: "one", the whole shot in that file; "tree", that file is a
+    root stage whose trees are payloads, one layer per tree in
+    `out/name.trees/` (a DCC opens the stage at once and loads trees on
+    demand; memory follows one tree)."""
+    if layers not in ("one", "tree"):
+        raise ValueError(f"layers must be 'one' or 'tree', got {layers!r}")
+    ext = ".usda" if ascii else ".usd"
     w = _Writer(bake, name, frame_start, maps)
     result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
+    folder = f"{name}.trees"
+    # a tree layer sits one folder down: its texture paths climb out of it
+    up = {m: (f"../{path}", cutout) for m, (path, cutout) in (maps or {}).items()}
+    checked = _layers_checked(len(meshes)) if check else set()
     for i, mesh in enumerate(meshes):
-        result.joints += w.tree(i, mesh)
+        if layers == "one":
+            result.joints += w.tree(i, mesh)
+        else:
+            prim = w.unique(w.root, bake.trees[i].name)
+            tw = _Writer(bake, prim.rsplit("/", 1)[1], frame_start, up, kind="component")
+            result.joints += tw.tree(i, mesh, tw.root)
+            result.subframe_codes += tw.subframe_codes
+            layer = Path(out) / folder / f"{prim.rsplit('/', 1)[1]}{ext}"
+            result.files.append(write_bytes(layer, tw.save(layer)))
+            if i in checked:
+                result.validation_errors += [f"{layer.name}: {e}" for e in validate(layer)]
+            w.stage.DefinePrim(prim).GetPayloads().AddPayload(f"./{folder}/{layer.name}")
         if progress is not None:
             progress(i + 1, len(meshes))
     w.objects()
-    result.subframe_codes = w.subframe_codes
-    path = Path(out) / f"{name}{'.usda' if ascii else '.usd'}"
+    result.subframe_codes += w.subframe_codes
+    path = Path(out) / f"{name}{ext}"
     result.files.append(write_bytes(path, w.save(path)))
     if check:
-        result.validation_errors = validate(path)
+        result.validation_errors += validate(path, load=layers == "one")
+        result.layers_checked = len(checked) if layers == "tree" else 0
     return result
+
+
+LAYERS_CHECKED = 20  # tree layers validated on their own, at most, spread over the shot
+
+
+def _layers_checked(trees: int) -> set[int]:
+    """Which tree layers an export validates: all of a small shot, else
+    LAYERS_CHECKED of them spread evenly, the first and last included."""
+    if trees <= LAYERS_CHECKED:
+        return set(range(trees))
+    return {round(k * (trees - 1) / (LAYERS_CHECKED - 1)) for k in range(LAYERS_CHECKED)}

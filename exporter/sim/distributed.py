@@ -57,11 +57,11 @@ def check_versions(client) -> int:
     return len(theirs)
 
 
-def run_chunks(address: str, calls: list[tuple], progress=None, log=None) -> list:
+def run_chunks(address: str, calls: list[tuple], progress=None, log=None):
     """simulate_chunk(*args) for each of `calls` as tasks on the cluster at
-    `address`, results in order; `progress.chunk_done(k)` as each comes."""
-    from .lod import results_in_order
-    from .scheduler import simulate_chunk
+    `address`, results yielded in order; `progress.chunk_done(k)` as each
+    comes."""
+    from .scheduler import results_in_order, simulate_chunk
 
     client = connect(address)
     with client:
@@ -73,7 +73,7 @@ def run_chunks(address: str, calls: list[tuple], progress=None, log=None) -> lis
                                  key=f"treebake-chunk-{run}-{k}")
                    for k, args in enumerate(calls)]
         try:
-            return results_in_order(futures, progress)
+            yield from results_in_order(futures, progress)
         except BaseException:
-            client.cancel(futures)
+            client.cancel([f for f in futures if f is not None])
             raise

@@ -15,14 +15,15 @@ one chunk."""
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 from ..quality import Quality
 from ..scene import Scene
 from .common import SimTree
 from .loads import SceneLoads
-from .notes import solve_result
+from .notes import solve_result, spans_text
 from .progress import ChunkProgress
-from .scheduler import ChunkResult, simulate_chunk
+from .scheduler import ChunkResult, results_in_order, simulate_chunk
 from .solver import SolveResult
 
 CHUNK_SEGMENTS = 2000  # segments per chunk: big enough to amortise numpy, small to spread
@@ -54,29 +55,30 @@ def chunks(trees: list[SimTree], qualities: list[Quality],
 
 def simulate(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], scene: Scene,
              loads: SceneLoads, workers: int = 1, log=None,
-             progress=None, scheduler: str | None = None) -> list[ChunkResult]:
+             progress=None, scheduler: str | None = None) -> Iterator[ChunkResult]:
     """Each chunk of `plan` through its tiers, in `workers` processes or as
-    tasks on the Dask scheduler at `scheduler` (distributed.py);
+    tasks on the Dask scheduler at `scheduler` (distributed.py), yielded in
+    plan order as they finish (a chunk's result is not kept once taken);
     `progress(done, total)` hears the planned work done (progress.py)."""
     tick = None if progress is None else ChunkProgress(trees, plan, scene, progress)
     if scheduler:
         from .distributed import run_chunks
 
-        results = run_chunks(scheduler, [([trees[i] for i in members], scene, q, loads)
-                                         for q, members in plan], tick, log)
+        yield from run_chunks(scheduler, [([trees[i] for i in members], scene, q, loads)
+                                          for q, members in plan], tick, log)
     else:
-        results = _simulate(trees, plan, scene, loads, workers, log, tick)
+        yield from _simulate(trees, plan, scene, loads, workers, log, tick)
     if tick is not None:
         tick.finish()
-    return results
 
 
-def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkResult]:
+def _simulate(trees, plan, scene, loads, workers, log, progress) -> Iterator[ChunkResult]:
     workers = max(1, min(workers, len(plan)))
     if workers == 1:
-        return [simulate_chunk([trees[i] for i in members], scene, q, loads, log,
-                           None if progress is None else progress.chunk(k))
-                for k, (q, members) in enumerate(plan)]
+        for k, (q, members) in enumerate(plan):
+            yield simulate_chunk([trees[i] for i in members], scene, q, loads, log,
+                                 None if progress is None else progress.chunk(k))
+        return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -84,18 +86,7 @@ def _simulate(trees, plan, scene, loads, workers, log, progress) -> list[ChunkRe
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         futures = [pool.submit(simulate_chunk, [trees[i] for i in members], scene, q, loads)
                    for q, members in plan]
-        return results_in_order(futures, progress)
-
-
-def results_in_order(futures, progress=None) -> list[ChunkResult]:
-    """The chunks' results in plan order (local or Dask futures alike),
-    `progress.chunk_done(k)` as each comes."""
-    results = []
-    for k, fut in enumerate(futures):
-        results.append(fut.result())
-        if progress is not None:
-            progress.chunk_done(k)
-    return results
+        yield from results_in_order(futures, progress)
 
 
 class PlanarLOD:
@@ -109,8 +100,20 @@ class PlanarLOD:
         self.loads, self.workers, self.scheduler = loads, workers, scheduler
         self.log = log or (lambda msg: None)
 
-    def run(self, progress=None) -> SolveResult:
+    def run(self, progress=None, on_tree=None) -> SolveResult:
+        """Simulate every chunk; `on_tree(index, motion, engines)` (solver.
+        TreeSink) takes each tree's motion as its chunk finishes, and the
+        result then keeps none."""
         plan = chunks(self.trees, self.qualities, whole=bool(self.scene.projectiles))
-        results = simulate(self.trees, plan, self.scene, self.loads, self.workers, self.log,
-                           progress, self.scheduler)
+        results = []
+        # the generator runs to its end (not zip's: it would stop one short of
+        # the pool's shutdown and the progress's last word)
+        for k, res in enumerate(simulate(self.trees, plan, self.scene, self.loads, self.workers,
+                                         self.log, progress, self.scheduler)):
+            members = plan[k][1]
+            if on_tree is not None:
+                for i, motion, spans in zip(members, res.motions, res.spans):
+                    on_tree(i, motion, spans_text(spans))
+                res.motions = [None] * len(members)  # taken: memory follows the chunk
+            results.append(res)
         return solve_result(self.trees, plan, results, self.scene)

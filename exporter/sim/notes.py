@@ -20,11 +20,12 @@ SMALLEST = ("step", "substep", "force_interval", "stability")  # per run: the fi
 def solve_result(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], results: list,
                  scene: Scene) -> SolveResult:
     """The planar LOD's SolveResult from its chunks' results (scheduler.
-    ChunkResult, in `plan`'s order)."""
+    ChunkResult, in `plan`'s order; a motion already taken is None)."""
     motions, tiers = {}, {}
     for (_, members), res in zip(plan, results):
         for i, motion, spans in zip(members, res.motions, res.spans):
-            motions[trees[i].name] = motion
+            if motion is not None:
+                motions[trees[i].name] = motion
             tiers[trees[i].name] = spans_text(spans)
     reports = [r for res in results for r in res.reports]
     returned = sum(s.reason is Reason.BACK for res in results for spans in res.spans

@@ -10,7 +10,7 @@ from ..scene import Scene
 from .audit import audit_motions, gain_notes
 from .events import summary
 from .rigging import RiggedScene
-from .solver import Solver, SolveResult
+from .solver import Solver, SolveResult, TreeSink
 
 
 class SolverKind(StrEnum):
@@ -31,6 +31,18 @@ def solver_kind(solver: str) -> SolverKind:
     return kind
 
 
+def segments_held(kind: SolverKind, scene: Scene, workers: int) -> int | None:
+    """At most how many animated segments have their motion in memory at
+    once when each tree is handed on as soon as it is final (None: all):
+    the planar LOD's chunks being simulated or waiting to be taken; the
+    full reference and scenes with projectiles are one model."""
+    if kind is SolverKind.FULL or scene.projectiles:
+        return None
+    from .lod import CHUNK_SEGMENTS
+
+    return CHUNK_SEGMENTS * (2 * max(workers, 1) + 1)
+
+
 def require_mujoco() -> None:
     """Raise InputError if MuJoCo cannot be imported."""
     try:
@@ -43,17 +55,34 @@ def require_mujoco() -> None:
 
 def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int = 1,
              timestep: float | None = None, log=None, progress=None,
-             scheduler: str | None = None) -> SolveResult:
+             scheduler: str | None = None, on_tree: TreeSink | None = None) -> SolveResult:
     """The scene's active trees through the solver of `kind` (`timestep` s:
     the full reference's step, default its own; `workers` processes, or the
-    Dask cluster at `scheduler`, share the planar LOD's chunks); its result with the energy audit in its meta
-    (meta["energy"]) and the audit's warnings among its notes, and for
-    people one log line per tree and kind of event, then the notes."""
+    Dask cluster at `scheduler`, share the planar LOD's chunks); its result
+    with the energy audit in its meta (meta["energy"]) and the audit's
+    warnings among its notes, and for people one log line per tree and
+    kind of event, then the notes. With `on_tree` (solver.TreeSink) each
+    tree's motion goes there as soon as it is final (audited first) and the
+    result keeps none: memory follows the chunk, not the shot."""
     log = log or (lambda msg: None)
-    result = solver_for(kind, rigged, scene, workers, timestep, log, scheduler).run(progress)
-    result.meta["energy"] = audit_motions(result.motions, scene.fps)
-    result.notes = result.notes + gain_notes(result.meta["energy"])
-    for line in summary({name: m.events for name, m in result.motions.items()}) + result.notes:
+    energy, events, kept = {}, {}, {}
+
+    def audited(index: int, motion, engines: str) -> None:
+        name = rigged.trees[index].name
+        energy.update(audit_motions({name: motion}, scene.fps))
+        events[name] = motion.events
+        if on_tree is not None:
+            on_tree(index, motion, engines)
+        else:
+            kept[name] = motion
+
+    result = solver_for(kind, rigged, scene, workers, timestep, log, scheduler).run(progress,
+                                                                                   audited)
+    result.meta["energy"] = energy
+    result.notes = result.notes + gain_notes(energy)
+    if on_tree is None:  # kept for the caller, in the order they came
+        result.motions = kept
+    for line in summary(events) + result.notes:
         log(line)
     return result
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -283,3 +284,17 @@ def simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality, loads: 
     while queue:
         queue.extend(chunk.execute(queue.popleft()))
     return chunk.result()
+
+
+def results_in_order(futures: list, progress=None) -> Iterator[ChunkResult]:
+    """The chunks' results in plan order (local or Dask futures alike),
+    `progress.chunk_done(k)` as each comes; each future is let go once its
+    result is taken, so finished chunks are not held."""
+    for k in range(len(futures)):
+        fut, futures[k] = futures[k], None
+        yield fut.result()
+        if hasattr(fut, "release"):  # Dask: the worker may forget it too
+            fut.release()
+        del fut
+        if progress is not None:
+            progress.chunk_done(k)

@@ -29,11 +29,21 @@ class SolveResult:
     timing: dict = field(default_factory=dict)
 
 
-class Solver(Protocol):
-    """A solver: `run(progress)` simulates the scene's active trees;
-    `progress(done, total)` is called as it goes (any units, growing)."""
+class TreeSink(Protocol):
+    """Takes one simulated tree as soon as its motion is final: its index
+    among the scene's rigged trees, its motion, and in words the engines
+    that moved it (SolveResult.tiers)."""
 
-    def run(self, progress=None) -> SolveResult: ...
+    def __call__(self, index: int, motion: TreeMotion, engines: str) -> None: ...
+
+
+class Solver(Protocol):
+    """A solver: `run(progress, on_tree)` simulates the scene's active
+    trees; `progress(done, total)` is called as it goes (any units,
+    growing); with `on_tree` (TreeSink) each tree's motion goes there as
+    soon as it is final and the result's `motions` stays empty."""
+
+    def run(self, progress=None, on_tree: TreeSink | None = None) -> SolveResult: ...
 
 
 def frame_timing(frame_seconds, substeps_per_frame: int) -> dict:

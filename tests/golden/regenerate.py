@@ -22,7 +22,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 sys.path.insert(0, str(ROOT))
 
-from treebake.bake import save_bake
+from treebake.bake_file import save_bake
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
 

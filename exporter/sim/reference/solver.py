@@ -135,8 +135,11 @@ class ReferenceSolver:
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality, loads: SceneLoads,
                  log=None, timestep: float | None = None, force_rate: float | None = None):
         self.engine = ReferenceEngine(trees, scene, quality, loads, log, timestep, force_rate)
+        self.index = {t.name: i for i, t in enumerate(trees)}
 
-    def run(self, progress=None) -> SolveResult:
+    def run(self, progress=None, on_tree=None) -> SolveResult:
+        """Simulate the shot as one model; with `on_tree` (solver.TreeSink)
+        each tree's motion goes there at the end and the result keeps none."""
         engine = self.engine
         engine.begin()
         frames = engine.scene.frame_count
@@ -152,5 +155,9 @@ class ReferenceSolver:
         meta = {"substep": engine.h, "force_interval": engine.dt_force, "integrator": "discrete",
                 "stats": {k: v for k, v in rep.stats.items() if k != "first_limit"}}
         motions = {t.name: m for t, m in zip(engine.trees, engine.motions())}
+        if on_tree is not None:
+            for name, motion in motions.items():
+                on_tree(self.index[name], motion, Engine.REFERENCE.value)
+            motions = {}
         return SolveResult(motions, tracks(engine), meta, notes,
                            {t.name: Engine.REFERENCE.value for t in engine.trees}, rep.timing)

@@ -1,0 +1,202 @@
+"""Streamed bakes (bake_file.py): a bake written tree by tree as the
+simulation finishes each chunk, read back tree by tree; the same bytes as
+the in-memory bake saved whole; nothing left behind by a failure."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from treebake import bake_file
+from treebake.bake_file import BakeWriter, load_bake, save_bake
+from treebake.errors import InputError
+from treebake.pipeline import bake_scene
+from treebake.scene import parse_scene
+from treebake.sim import lod, scheduler
+
+FOREST = [str(ROOT / "grammars" / "forest" / f"{g}.lsys") for g in ("conifer", "broadleaf",
+                                                                     "birch")]
+
+
+def forest(count=90, duration=0.5):
+    """`count` forest trees in a breeze (two or more chunks), seen by a
+    camera that sees the far ones at draft quality (chunks of two
+    qualities: not the trees' order), and one tree it never sees (static)."""
+    raw = {"name": "stream", "duration": duration, "fps": 24.0, "seed": 3,
+           "wind": {"speed": 8.0, "direction": 30.0, "turbulence": 0.3},
+           "forest": {"grammars": FOREST, "count": count, "area": [100.0, 100.0],
+                      "min_spacing": 6.0},
+           "tree": [{"grammar": FOREST[0], "position": [5000.0, 5000.0]}],
+           "camera": {"fov": 60.0, "margin": 10.0, "far": 60.0, "far_quality": "draft",
+                      "keys": [{"time": 0.0, "position": [-80.0, 0.0, 2.0],
+                                "target": [0.0, 0.0, 2.0]}]}}
+    return parse_scene(raw, file="<stream test>")
+
+
+@pytest.fixture(scope="module")
+def streamed(tmp_path_factory):
+    """The forest baked straight to its file, and how the work went: each
+    chunk simulated, each tree written, in the order they happened."""
+    path = tmp_path_factory.mktemp("stream") / "stream.npz"
+    happened = []
+    real_chunk, real_add = scheduler.simulate_chunk, BakeWriter.add
+
+    def chunk(trees, *args, **kw):
+        happened.append(("chunk", [t.name for t in trees]))
+        return real_chunk(trees, *args, **kw)
+
+    def add(self, index, tree):
+        happened.append(("tree", tree.name))
+        return real_add(self, index, tree)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(lod, "simulate_chunk", chunk)
+    mp.setattr(BakeWriter, "add", add)
+    try:
+        bake = bake_scene(forest(), path=path, workers=1)
+    finally:
+        mp.undo()
+    return path, bake, happened
+
+
+def test_each_chunk_is_written_before_the_next_is_simulated(streamed):
+    _, bake, happened = streamed
+    chunks = [names for what, names in happened if what == "chunk"]
+    assert len(chunks) >= 2 and bake.meta["chunks"] == len(chunks)
+    # after the static tree, every chunk's trees are written right after it
+    # ran, before the next chunk starts: the bake never holds the whole shot
+    first = next(k for k, (what, _) in enumerate(happened) if what == "chunk")
+    static = sorted(t.name for t in bake.trees if t.static)
+    assert len(static) >= 1 and sorted(n for _, n in happened[:first]) == static
+    pos = first
+    for names in chunks:
+        assert happened[pos] == ("chunk", names)
+        assert [n for _, n in happened[pos + 1:pos + 1 + len(names)]] == names
+        pos += 1 + len(names)
+    assert pos == len(happened)
+
+
+def test_a_streamed_bake_has_the_bytes_of_the_bake_saved_whole(streamed, tmp_path):
+    path, _, _ = streamed
+    whole = save_bake(bake_scene(forest(), workers=2), tmp_path / "whole.npz")
+    assert whole.read_bytes() == path.read_bytes()
+    again = save_bake(load_bake(path), tmp_path / "again.npz")  # order kept on a round trip
+    assert again.read_bytes() == path.read_bytes()
+
+
+def test_a_lazy_bake_reads_a_tree_only_when_asked(streamed, monkeypatch):
+    path, bake, _ = streamed
+    read = []
+    real = bake_file._read_tree
+    monkeypatch.setattr(bake_file, "_read_tree", lambda z, i, *a: read.append(i) or real(z, i, *a))
+    lazy = load_bake(path, lazy=True)
+    assert read == [] and len(lazy.trees) == len(bake.trees) > 80
+    eager = load_bake(path)
+    read.clear()
+    t = lazy.trees[57]
+    assert read == [57]
+    assert t.name == eager.trees[57].name
+    np.testing.assert_array_equal(t.positions, eager.trees[57].positions)
+    np.testing.assert_array_equal(lazy.trees[-1].rotations, eager.trees[-1].rotations)
+    assert [x.name for x in lazy.trees] == [x.name for x in eager.trees]
+
+
+def test_a_bake_that_fails_midway_leaves_no_file(tmp_path, monkeypatch):
+    path = tmp_path / "stream.npz"
+    calls = []
+    real = scheduler.simulate_chunk
+
+    def chunk(*args, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # Ctrl-C in the second chunk
+        return real(*args, **kw)
+
+    monkeypatch.setattr(lod, "simulate_chunk", chunk)
+    with pytest.raises(KeyboardInterrupt):
+        bake_scene(forest(duration=0.2), path=path, workers=1)
+    assert len(calls) == 2
+    assert list(tmp_path.iterdir()) == []  # no bake, no temporary
+
+
+def test_a_damaged_tree_in_a_lazy_bake_is_named_when_read(streamed, tmp_path):
+    path, _, _ = streamed
+    data = bytearray(path.read_bytes())
+    start = data.find(b"tree40.positions.npy")  # its local header; the data follows
+    data[start + 200:start + 260] = bytes(60)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(bytes(data))
+    lazy = load_bake(bad, lazy=True)  # the directory is whole: it opens
+    lazy.trees[3]
+    with pytest.raises(InputError, match="damaged or truncated"):
+        lazy.trees[40]
+    with pytest.raises(InputError, match="damaged or truncated"):
+        load_bake(bad)  # read whole: refused at once
+
+
+def world_joints(path, load=True, times=(1, 7, 12)):
+    """Every skeleton's joint world transforms at `times` (USD time codes),
+    by skeleton prim path, from a stage opened with payloads loaded or not."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll if load else Usd.Stage.LoadNone)
+    cache, out = UsdSkel.Cache(), {}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdSkel.Root):
+            root = UsdSkel.Root(prim)
+            cache.Populate(root, Usd.PrimDefaultPredicate)
+            for b in cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate):
+                q = cache.GetSkelQuery(b.GetSkeleton())
+                out[str(prim.GetPath())] = np.array([
+                    np.array(q.ComputeJointWorldTransforms(UsdGeom.XformCache(Usd.TimeCode(t))))
+                    for t in times])
+    return out, stage
+
+
+def test_a_usd_of_many_trees_is_a_root_stage_of_payloads_with_the_same_motion(
+        streamed, tmp_path, monkeypatch):
+    pytest.importorskip("pxr")  # TREEBAKE_REQUIRE_TOOLS: see conftest
+    from treebake import export
+    from treebake.export import ExportOptions, export_bake
+
+    monkeypatch.setattr(export, "USD_LAYER_TREES", 50)  # "auto" past 50 trees here
+
+    path, _, _ = streamed
+    bake = load_bake(path, lazy=True)
+    one = export_bake(bake, tmp_path, "one", ExportOptions(formats=("usd",), usd_layers="one"))
+    layered = export_bake(bake, tmp_path, "many", ExportOptions(formats=("usd",)))  # auto
+    assert one.manifest["usd"]["layers"] == "one"
+    assert layered.manifest["usd"]["layers"] == "tree"
+    assert layered.manifest["usd"]["tree_layers_validated"] == 20
+    layers = sorted((tmp_path / "many" / "many.trees").iterdir())
+    assert len(layers) == len(bake.trees)
+    unloaded, stage = world_joints(tmp_path / "many" / "many.usd", load=False)
+    assert unloaded == {}  # opened with nothing loaded: no skeleton read
+    assert len([p for p in stage.TraverseAll() if p.HasPayload()]) == len(bake.trees)
+    whole, _ = world_joints(tmp_path / "one" / "one.usd")
+    loaded, _ = world_joints(tmp_path / "many" / "many.usd")
+    assert len(whole) == sum(not t.static for t in bake.trees) > 50
+    assert {k.replace("/many/", "/one/") for k in loaded} == set(whole)
+    for key, value in loaded.items():
+        np.testing.assert_allclose(value, whole[key.replace("/many/", "/one/")], atol=1e-6)
+
+
+def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(streamed, tmp_path):
+    from treebake.exchange.gltf_read import read_gltf_bake
+    from treebake.export import ExportOptions, export_bake
+
+    path, _, _ = streamed
+    bake = load_bake(path)
+    rep = export_bake(bake, tmp_path, "f", ExportOptions(formats=("glb",), trees_per_file=40))
+    parts = sorted((tmp_path / "f").glob("f.part*.glb"))
+    assert [p.name for p in parts] == ["f.part0001.glb", "f.part0002.glb", "f.part0003.glb"]
+    assert not (tmp_path / "f" / "f.glb").exists()
+    seen = {}
+    for p in parts:
+        for t in read_gltf_bake(p).trees:
+            assert t.name not in seen
+            seen[t.name] = t
+    moving = {t.name: t for t in bake.trees if not t.static}
+    assert set(moving) <= set(seen) and len(seen) == len(bake.trees)
+    for name, t in moving.items():  # within the keyframe reduction's tolerance
+        assert np.abs(seen[name].positions - t.positions).max() < 0.004
+    assert rep.manifest["settings"]["trees_per_file"] == 40
