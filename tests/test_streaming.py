@@ -178,6 +178,13 @@ def test_a_usd_of_many_trees_is_a_root_stage_of_payloads_with_the_same_motion(
     assert {k.replace("/many/", "/one/") for k in loaded} == set(whole)
     for key, value in loaded.items():
         np.testing.assert_allclose(value, whole[key.replace("/many/", "/one/")], atol=1e-6)
+    # the root is validated unloaded: a payload whose layer is gone is an error
+    from treebake.exchange.usd import validate
+
+    assert validate(tmp_path / "many" / "many.usd", load=False) == []
+    layers[3].unlink()
+    assert validate(tmp_path / "many" / "many.usd", load=False) == [
+        f"MissingPayload: /many/{layers[3].stem}: ./many.trees/{layers[3].name} not found"]
 
 
 def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(streamed, tmp_path):
