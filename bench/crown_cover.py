@@ -63,7 +63,8 @@ def export_rest_glb(grammar: str, folder: Path, seed: int | None = None) -> Path
 
     rig = grown_rig(_grammar_path(grammar), seed)
     pos, rot = segment_transforms(rig, None, None)
-    tree = tree_bake_from_model(rig.model, pos, rot, {"grammar": grammar})
+    tree = tree_bake_from_model(rig.model, pos, rot, {"grammar": grammar,
+                                                      "seed": rig.model.source.get("seed")})
     name = grammar.replace("/", "_")
     bake = Bake(np.zeros(1), [tree], {"scene": name, "fps": 24.0})
     export_bake(bake, folder, name, ExportOptions(formats=("glb",)))

@@ -209,8 +209,8 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
         "joints": sum(t.n_segments for t in bake.trees if not t.static),
         "broken_joints": broken, "vertices": sum(m.n_vertices for m in meshes),
         "triangles": sum(m.n_triangles for m in meshes),
-        "leaf_quads": sum(2 * int((t.leaf > 0).sum()) for t in bake.trees)
-        if opts.mesh.leaves else 0,
+        "leaf_quads": sum(len(p.faces) // 2 for m in meshes for p in m.parts
+                          if p.material.startswith("leaf")),
         "projectiles": 0 if bake.objects is None else len(bake.objects.sizes)}
     textures = _textures(meshes, opts)
     maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
