@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import ROOT
 from treebake.bake import tree_bake_from_model
-from treebake.exchange.foliage import STYLES
+from treebake.exchange.foliage import ATLAS, STYLES
 from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
 from treebake.lsystem import derive, load_grammar
 from treebake.turtle import interpret
@@ -108,9 +108,16 @@ def test_foliage_cards_sit_rigidly_on_their_leafy_segment_or_nothing():
     t = ((stem - a0) * (a1 - a0)).sum(1) / ((a1 - a0) ** 2).sum(1)
     assert (t > -1e-9).all() and (t < 1 + 1e-9).all()
     assert np.allclose(a0 + t[:, None] * (a1 - a0), stem, atol=1e-9)
-    # the texture's stem (v = 0) at the stem edge, v = 1 at the far edge
-    assert (mesh.uvs[quads[:, :2], 1] == 0).all() and (mesh.uvs[quads[:, 2:], 1] == 1).all()
-    for part in leaves:  # normals agree with the winding (renderers shade by both)
+    # one cell of the atlas each (a colour variant), its stem (the cell's
+    # bottom, v0) at the stem edge, its top (v0 + 1 / ATLAS) at the far edge;
+    # every variant in use
+    uv = mesh.uvs[quads]  # (C, 4, 2)
+    u0, v0 = uv[:, 0, 0], uv[:, 0, 1]
+    assert np.allclose(uv[:, :, 0] - u0[:, None], np.array([0, 1, 1, 0]) / ATLAS)
+    assert np.allclose(uv[:, :, 1] - v0[:, None], np.array([0, 0, 1, 1]) / ATLAS)
+    cells = set(zip((u0 * ATLAS).round().astype(int), (v0 * ATLAS).round().astype(int)))
+    assert cells == {(i, j) for i in range(ATLAS) for j in range(ATLAS)}
+    for part in leaves:  # normals on the winding's side (renderers shade by both)
         v = mesh.positions[part.faces]
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         assert ((n * mesh.normals[part.faces].sum(1)).sum(1) > 0).all()

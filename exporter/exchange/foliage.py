@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 MAX_CARDS = 64  # per leafy segment
+ATLAS = 2  # a leaf texture is ATLAS x ATLAS cards, one colour variant each (textures.py)
 
 
 @dataclass(frozen=True)
@@ -46,8 +47,8 @@ class FoliageStyle:
     lean: tuple[float, float] = (0.0, 1.2)
 
 
-BROADLEAF = FoliageStyle(edge=2.4, depth=1.2, fill=0.25)
-STYLES = {1: BROADLEAF, 2: FoliageStyle(edge=2.2, depth=1.2, fill=0.33),
+BROADLEAF = FoliageStyle(edge=2.4, depth=1.2, fill=0.40)
+STYLES = {1: BROADLEAF, 2: FoliageStyle(edge=2.2, depth=1.2, fill=0.49),
           3: FoliageStyle(edge=1.0, depth=0.5, fill=0.26), 4: BROADLEAF}
 
 
@@ -104,11 +105,14 @@ def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int) -> 
 
 
 def cards(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, segs: np.ndarray, kind: int,
-          seed: int):
+          seed: int, centre=None):
     """The cards of leafy segments `segs` (base p0, tip p1 (N, 3) m, leaf
     size (N,) m) of leaf type `kind`: positions (4C, 3), normals, UVs
     (stem at v = 0), joints and weights (rigid on the segment) and
-    triangles (2C, 3), and the segment of each card (C,)."""
+    triangles (2C, 3), and the segment of each card (C,). Each card shows
+    one cell of the leaf texture's atlas (its colour variant), by the seed.
+    `centre` (m): the crown's, which the cards' fronts and shading normals
+    face away from (default: the mean of the segments' midpoints)."""
     st = style(kind)
     n = card_counts(p0, p1, size, kind)
     owner = np.repeat(np.arange(len(segs)), n)
@@ -122,12 +126,24 @@ def cards(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, segs: np.ndarray, ki
     s = _across(d, _random_units(rng, c))  # its width, turned at random about d
     e = (st.edge * size[owner])[:, None]
     base = p0[owner] + t[:, None] * (p1 - p0)[owner]
+    # the card's front (its winding's side) faces out of the crown; its shading
+    # normal leans out too, so the crown shades as one mass, not card by card
+    away = base + 0.5 * e * d - (np.mean(0.5 * (p0 + p1), axis=0) if centre is None
+                                 else np.asarray(centre, np.float64))
+    away = _unit(away * [1.0, 1.0, 0.5])
+    face = np.cross(s, d)  # the winding's: (corner 1 - 0) x (corner 3 - 0)
+    flip = (face * away).sum(1) < 0
+    s[flip] *= -1.0
+    face[flip] *= -1.0
     half = 0.5 * e * s
     corners = np.stack([base - half, base + half, base + e * d + half, base + e * d - half], 1)
-    normal = np.cross(s, d)  # the winding's: (corner 1 - 0) x (corner 3 - 0)
     pos = corners.reshape(-1, 3)
-    nrm = np.repeat(normal, 4, axis=0)
-    uv = np.tile([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (c, 1))
+    nrm = np.repeat(_unit(face + 2.0 * away), 4, axis=0)
+    # each card one cell of the atlas, by the seed: its colour variant
+    cell = rng.integers(0, ATLAS * ATLAS, c)
+    corner = np.stack([cell % ATLAS, cell // ATLAS], 1).astype(np.float64) / ATLAS
+    uv = (np.repeat(corner, 4, axis=0) +
+          np.tile([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (c, 1)) / ATLAS)
     quad = (np.arange(c) * 4)[:, None]
     faces = np.concatenate([quad + [0, 1, 2], quad + [0, 2, 3]], axis=1).reshape(-1, 3)
     seg = np.repeat(segs[owner], 4)

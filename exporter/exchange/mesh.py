@@ -32,8 +32,10 @@ from ..rotations import apply, cross, matrices_from_quaternions
 from .foliage import cards
 
 BARK_COLOUR = (0.36, 0.25, 0.16)  # linear RGB
-LEAF_COLOURS = {1: (0.22, 0.48, 0.16), 2: (0.14, 0.34, 0.12), 3: (0.55, 0.55, 0.16),
-                4: (0.62, 0.30, 0.10)}
+# linear RGB, the albedo of leaves in leaf (measured green leaves reflect
+# 0.05-0.1 in red and blue, 0.1-0.2 in green; needles darker and bluer)
+LEAF_COLOURS = {1: (0.10, 0.22, 0.055), 2: (0.045, 0.10, 0.06), 3: (0.16, 0.24, 0.07),
+                4: (0.50, 0.21, 0.05)}
 OBJECT_COLOUR = (0.55, 0.45, 0.35)
 BREAK_GAP = 0.01  # m: a joint whose child base leaves the parent by more is broken
 
@@ -355,12 +357,17 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
     arrays = [(pos, nrm, uv, jnt, wts)]
     offset = len(pos)
     if opts.leaves:
-        for kind in np.unique(tree.leaf[tree.leaf > 0]):
+        leafy = tree.leaf > 0
+        centre = 0.5 * (tree.points[tree.seg_start[leafy]] +
+                        tree.points[tree.seg_end[leafy]]).astype(np.float64).mean(0) \
+            if leafy.any() else None
+        for kind in np.unique(tree.leaf[leafy]):
             segs = np.nonzero(tree.leaf == kind)[0]
             lp, ln, lu, lj, lw, lf, _ = cards(
                 tree.points[tree.seg_start[segs]].astype(np.float64),
                 tree.points[tree.seg_end[segs]].astype(np.float64),
-                tree.leaf_size[segs].astype(np.float64), segs, int(kind), tree_seed(tree))
+                tree.leaf_size[segs].astype(np.float64), segs, int(kind), tree_seed(tree),
+                centre)
             name = "leaf" if kind == 1 else f"leaf{int(kind)}"
             parts.append(MeshPart(name, lf + offset, leaf_colour(kind), double_sided=True))
             arrays.append((lp, ln, lu, lj, lw))
