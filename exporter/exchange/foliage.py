@@ -47,7 +47,7 @@ class FoliageStyle:
     lean: tuple[float, float] = (0.0, 1.2)
 
 
-BROADLEAF = FoliageStyle(edge=2.4, depth=1.2, fill=0.40)
+BROADLEAF = FoliageStyle(edge=2.4, depth=1.4, fill=0.40)
 STYLES = {1: BROADLEAF, 2: FoliageStyle(edge=2.2, depth=1.2, fill=0.49),
           3: FoliageStyle(edge=1.0, depth=0.5, fill=0.26), 4: BROADLEAF}
 
