@@ -172,7 +172,7 @@ class TreeMeshes(Sequence[TreeMesh]):
                  "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
                  "segments": tree.n_segments, "static": tree.static},
                 tree.n_segments, tree.static, len(tree.extra_times),
-                2 * int((tree.leaf > 0).sum()) if self.opts.leaves else 0,
+                sum(len(p.faces) // 2 for p in mesh.parts if p.material.startswith("leaf")),
                 mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
             self._last = (i, mesh)
         return self._last[1]

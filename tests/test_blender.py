@@ -59,26 +59,59 @@ def test_blender_frame_k_is_the_bakes_frame_k_for_glb_and_usd(tmp_path):
           f"neighbouring frames differ by up to {step * 1e3:.0f} mm")
 
 
+def _opaque_copy(src: Path, dst: Path) -> None:
+    """The glb with every embedded image's alpha set to 255: the same
+    picture but for the cut-out (pygltflib, an independent reader)."""
+    import io
+
+    import pygltflib
+    from PIL import Image
+
+    g = pygltflib.GLTF2().load(str(src))
+    blob = bytearray(g.binary_blob())
+    for image in g.images:
+        view = g.bufferViews[image.bufferView]
+        data = blob[view.byteOffset:view.byteOffset + view.byteLength]
+        img = Image.open(io.BytesIO(bytes(data))).convert("RGBA")
+        img.putalpha(255)
+        out = io.BytesIO()
+        img.save(out, format="PNG")
+        png = out.getvalue()
+        # the new image at the blob's end (4-byte aligned); its view points there
+        blob += bytes(-len(blob) % 4)
+        view.byteOffset, view.byteLength = len(blob), len(png)
+        blob += png
+    blob += bytes(-len(blob) % 4)
+    g.buffers[0].byteLength = len(blob)
+    g.set_binary_blob(bytes(blob))
+    g.save_binary(str(dst))
+
+
 def test_blender_renders_the_leaf_cards_cut_out_by_their_alpha(tmp_path):
     """Cycles (CPU) renders the glb as a user would: the embedded textures
     load (no missing-texture magenta) and the cards' alpha mask cuts the
-    leaves out, so fewer pixels are leaf-green than with plain cards."""
+    leaves out: fewer pixels are leaf-green than in the same glb with its
+    textures made opaque (without the cut-out the two pictures are one)."""
     import blender
     from PIL import Image
 
     bake = preset_bake("demo")
+    export_bake(bake, tmp_path, "tex", ExportOptions(formats=("glb",)))
+    glb = tmp_path / "tex" / "tex.glb"
+    _opaque_copy(glb, tmp_path / "opaque.glb")
     green = {}
-    for textures in (True, False):
-        name = "tex" if textures else "plain"
-        export_bake(bake, tmp_path, name, ExportOptions(formats=("glb",), textures=textures))
+    for name, path in (("tex", glb), ("opaque", tmp_path / "opaque.glb")):
         png = tmp_path / f"{name}.png"
-        blender.run("blender_render.py", str(tmp_path / name / f"{name}.glb"), str(png), "20",
+        blender.run("blender_render.py", str(path), str(png), "20",
                     "--engine", "cycles", "--size", "320x180", "--samples", "4")
         rgb = np.asarray(Image.open(png).convert("RGB")).astype(int)
         r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-        green[name] = int(((g > r + 12) & (g > b + 12)).sum())
+        green[name] = int(((g > r + 8) & (g > b + 8)).sum())
         assert not ((r > 200) & (g < 80) & (b > 200)).any()  # Blender's missing texture
-    assert 0.15 * green["plain"] < green["tex"] < 0.75 * green["plain"], green
+    # the same scene renders the same pixels (Cycles' seed is fixed): without
+    # the cut-out the ratio is 1; the dense crown's cards overlap, so the
+    # cut-out removes about a tenth of its green (0.90 measured)
+    assert 0.15 * green["opaque"] < green["tex"] < 0.97 * green["opaque"], green
 
 
 @pytest.mark.parametrize("duration", [None, pytest.param(8.0, marks=pytest.mark.slow)],
@@ -184,3 +217,19 @@ def test_blender_renders_the_abc_like_the_glb(tmp_path):
     differ = (np.abs(images["abc"] - images["glb"]).max(axis=-1) > 10).mean()
     print(f"abc vs glb render: {100 * differ:.3f} % of pixels differ by more than 10 levels")
     assert differ < 0.01, differ
+
+
+def test_the_render_scripts_alembic_colours_are_the_exporters():
+    """tests/tools/blender_render.py colours the Alembic import's face-set
+    materials itself (it runs in Blender's Python): the exporters' colours."""
+    import ast
+
+    from conftest import ROOT
+    from treebake.exchange.mesh import BARK_COLOUR, LEAF_COLOURS, OBJECT_COLOUR
+
+    tree = ast.parse((ROOT / "tests" / "tools" / "blender_render.py").read_text())
+    colours = next(ast.literal_eval(n.value) for n in ast.walk(tree)
+                   if isinstance(n, ast.Assign) and getattr(n.targets[0], "id", "") == "COLOURS")
+    want = {"bark": BARK_COLOUR, "object": OBJECT_COLOUR,
+            **{("leaf" if k == 1 else f"leaf{k}"): v for k, v in LEAF_COLOURS.items()}}
+    assert colours == want

@@ -1,9 +1,11 @@
 """Tree meshes: generalized cylinders with outward normals and UVs, joint
 rings blended half and half, broken joints split (no stretched skin on
-debris), leaves as crossed quads or none, fast on a willow."""
+debris), foliage cards rigid on their leafy segments (placed by the tree's
+seed) or none, fast on a willow."""
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 
 from bakes import ROOT
 from treebake.bake import tree_bake_from_model
+from treebake.exchange.foliage import ATLAS, STYLES
 from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
 from treebake.lsystem import derive, load_grammar
 from treebake.turtle import interpret
@@ -72,18 +75,66 @@ def test_joint_rings_blend_parent_and_child():
     assert ((mesh.weights[:, 1] > 0) <= (mesh.joints[:, 0] != mesh.joints[:, 1])).all()
 
 
-def test_leaves_are_crossed_quads_or_nothing():
+def _cards(mesh):
+    """Leaf parts' quads: vertex indices (C, 4), 4 consecutive vertices each."""
+    faces = np.concatenate([p.faces for p in mesh.parts if p.material.startswith("leaf")])
+    first = faces[0::2, 0]
+    assert (faces[0::2] == first[:, None] + [0, 1, 2]).all()
+    assert (faces[1::2] == first[:, None] + [0, 2, 3]).all()
+    return first[:, None] + np.arange(4)
+
+
+def test_foliage_cards_sit_rigidly_on_their_leafy_segment_or_nothing():
     tree = rest_tree("oak.lsys")
-    leafy = int((tree.leaf > 0).sum())
     mesh = tree_mesh(tree)
     leaves = [p for p in mesh.parts if p.material.startswith("leaf")]
-    assert sum(len(p.faces) for p in leaves) == 4 * leafy and all(p.double_sided for p in leaves)
-    for part in leaves:  # normals agree with the winding (renderers shade by both)
+    assert leaves and all(p.double_sided for p in leaves)
+    quads = _cards(mesh)
+    seg = mesh.joints[quads[:, 0], 0]
+    # rigid (one influence, the segment itself), all four corners on one leafy segment
+    assert (mesh.joints[quads] == seg[:, None, None]).all()
+    assert (mesh.weights[quads.ravel()] == [1.0, 0.0]).all()
+    assert (tree.leaf[seg] > 0).all()
+    assert set(np.unique(seg)) == set(np.nonzero(tree.leaf > 0)[0])  # every leafy segment
+    p = mesh.positions[quads]  # (C, 4, 3)
+    # a square of edge e = EDGE x the segment's leaf size, its stem edge's
+    # midpoint on the segment between its base and tip
+    e = STYLES[1].edge * tree.leaf_size[seg]
+    for a, b in ((0, 1), (1, 2), (2, 3), (3, 0)):
+        assert np.allclose(np.linalg.norm(p[:, a] - p[:, b], axis=1), e)
+    assert np.allclose(np.linalg.norm(p[:, 0] - p[:, 2], axis=1), e * np.sqrt(2))
+    stem = 0.5 * (p[:, 0] + p[:, 1])
+    a0, a1 = tree.points[tree.seg_start[seg]], tree.points[tree.seg_end[seg]]
+    t = ((stem - a0) * (a1 - a0)).sum(1) / ((a1 - a0) ** 2).sum(1)
+    assert (t > -1e-9).all() and (t < 1 + 1e-9).all()
+    assert np.allclose(a0 + t[:, None] * (a1 - a0), stem, atol=1e-9)
+    # one cell of the atlas each (a colour variant), its stem (the cell's
+    # bottom, v0) at the stem edge, its top (v0 + 1 / ATLAS) at the far edge;
+    # every variant in use
+    uv = mesh.uvs[quads]  # (C, 4, 2)
+    u0, v0 = uv[:, 0, 0], uv[:, 0, 1]
+    assert np.allclose(uv[:, :, 0] - u0[:, None], np.array([0, 1, 1, 0]) / ATLAS)
+    assert np.allclose(uv[:, :, 1] - v0[:, None], np.array([0, 0, 1, 1]) / ATLAS)
+    cells = set(zip((u0 * ATLAS).round().astype(int), (v0 * ATLAS).round().astype(int)))
+    assert cells == {(i, j) for i in range(ATLAS) for j in range(ATLAS)}
+    for part in leaves:  # normals on the winding's side (renderers shade by both)
         v = mesh.positions[part.faces]
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         assert ((n * mesh.normals[part.faces].sum(1)).sum(1) > 0).all()
     bare = tree_mesh(tree, MeshOptions(leaves=False))
-    assert len(bare.parts) == 1 and bare.n_vertices == mesh.n_vertices - 8 * leafy
+    assert len(bare.parts) == 1 and bare.n_vertices == mesh.n_vertices - 4 * len(quads)
+    assert np.array_equal(bare.positions, mesh.positions[:bare.n_vertices])
+
+
+def test_foliage_follows_the_trees_seed_and_only_it():
+    tree = rest_tree("sapling.lsys")
+    one, two = tree_mesh(replace(tree, info={"seed": 7})), tree_mesh(replace(tree, info={"seed": 7}))
+    other = tree_mesh(replace(tree, info={"seed": 8}))
+    assert np.array_equal(one.positions, two.positions) and np.array_equal(one.uvs, two.uvs)
+    bark = one.parts[0].faces.max() + 1
+    assert one.positions.shape == other.positions.shape  # as many cards: the counts are geometry's
+    assert np.array_equal(one.positions[:bark], other.positions[:bark])  # the same bark
+    assert not np.array_equal(one.positions[bark:], other.positions[bark:])
 
 
 def test_broken_joints_split_the_skin():

@@ -7,9 +7,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from simkit import tip
-from treebake.exchange.mesh import pose, tree_mesh
+from treebake.exchange.foliage import STYLES
+from treebake.exchange.mesh import MeshOptions, pose, tree_mesh
 from treebake.pipeline import bake_scene
 from treebake.quality import QUALITIES
+from treebake.rotations import matrices_from_quaternions
 from treebake.scene import parse_scene
 from treebake.stress import kinetic_energy
 from treebake.sway import segment_ends
@@ -60,13 +62,41 @@ def test_felled_tree_falls_in_the_cut_direction_and_comes_to_rest(tmp_path, root
 
 
 def lowest_mesh_point(tree) -> tuple[float, float]:
-    """The lowest point (m) of the bark and of the leaf cards, over every
-    frame, of the mesh the exporters write (glTF skins it the same way)."""
-    mesh = tree_mesh(tree)
-    bark = np.unique(mesh.parts[0].faces)
-    leaves = np.setdiff1d(np.arange(mesh.n_vertices), bark)
+    """The lowest point (m) of the bark, over every frame, of the mesh the
+    exporters write (glTF skins it the same way), and of the physics'
+    foliage: two crossed cards of `leaf size` centred on each leafy segment
+    (rig.py's leaf area; the reference's envelope holds them out of the
+    ground)."""
+    mesh = tree_mesh(tree, MeshOptions(leaves=False))
     low = np.array([pose(mesh, tree, f)[0][:, 2] for f in range(tree.positions.shape[0])])
-    return float(low[:, bark].min()), float(low[:, leaves].min(initial=np.inf))
+    segs = np.nonzero(tree.leaf > 0)[0]
+    if not len(segs):
+        return float(low.min()), float("inf")
+    p0, p1 = tree.points[tree.seg_start[segs]], tree.points[tree.seg_end[segs]]
+    a = (p1 - p0) / np.linalg.norm(p1 - p0, axis=1)[:, None]
+    ref = np.where(np.abs(a[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    u = np.cross(a, ref)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    w = np.cross(a, u)
+    h = 0.5 * tree.leaf_size[segs][:, None]
+    c = 0.5 * (p0 + p1)
+    corners = np.stack([c + sa * a * h + sb * side * h for side in (u, w)
+                        for sa in (-1, 1) for sb in (-1, 1)], 1)  # (N, 8, 3)
+    lowest = np.inf
+    for f in range(tree.positions.shape[0]):
+        r = matrices_from_quaternions(tree.rotations[f, segs].astype(np.float64))
+        posed = tree.positions[f, segs, None] + np.einsum("nij,nkj->nki", r, corners - p0[:, None])
+        lowest = min(lowest, float(posed[..., 2].min()))
+    return float(low.min()), lowest
+
+
+def lowest_foliage_point(tree) -> float:
+    """The lowest point (m), over every frame, of the foliage cards the
+    exporters draw (foliage.py: denser and wider than the physics' cards)."""
+    mesh = tree_mesh(tree)
+    leaves = np.unique(np.concatenate([p.faces for p in mesh.parts[1:]]))
+    return float(min(pose(mesh, tree, f)[0][leaves, 2].min()
+                     for f in range(tree.positions.shape[0])))
 
 
 def test_a_felled_trees_mesh_stays_out_of_the_ground_on_the_reference(root):
@@ -86,6 +116,12 @@ def test_a_felled_trees_mesh_stays_out_of_the_ground_on_the_reference(root):
     # MuJoCo's soft contact gives way a little under the landing stem
     assert bark > -0.01 and leaves > -0.02, (bark, leaves)
     assert tree.positions[:, 0, 2].min() > -0.001  # the stem's base never went into the ground
+    # the drawn foliage reaches farther than the physics' cards (docs/look.md):
+    # the ground does not hold it up beyond them (foliage is not a cushion);
+    # it goes no deeper than its own reach, edge x leaf size from the axis
+    reach = max(STYLES[int(k)].edge for k in np.unique(tree.leaf[tree.leaf > 0])) * \
+        float(tree.leaf_size.max())
+    assert lowest_foliage_point(tree) > -reach
 
 
 def test_a_stout_stem_cut_falls_over_its_hinge(tmp_path):

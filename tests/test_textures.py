@@ -19,6 +19,7 @@ from conftest import need
 from gltfread import Gltf
 from treebake.cli import main
 from treebake.exchange import textures
+from treebake.exchange.foliage import ATLAS, STYLES
 from treebake.export import ExportOptions, export_bake
 
 
@@ -35,14 +36,28 @@ def test_textures_are_deterministic_and_well_formed():
     rows = np.abs(np.diff(img, axis=0)).mean()
     assert np.abs(img[:, -1] - img[:, 0]).mean() < 2 * cols
     assert np.abs(img[-1] - img[0]).mean() < 2 * rows
+    n, size = ATLAS, textures.CARD_SIZE
     for kind in (1, 2, 3):
         card = textures.leaf_texture(kind)
         rgba = np.asarray(Image.open(io.BytesIO(card.png)))
-        assert rgba.shape == (512, 512, 4) and card.cutout and not card.repeat
-        alpha = rgba[..., 3]
-        assert set(np.unique(alpha)) == {0, 255}  # a clean mask
-        assert 0.1 < (alpha > 0).mean() < 0.6  # leaves and gaps
-        assert alpha[-1].any()  # the stem reaches the card's bottom edge (v = 0)
+        assert rgba.shape == (n * size, n * size, 4) and card.cutout and not card.repeat
+        assert set(np.unique(rgba[..., 3])) == {0, 255}  # a clean mask
+        means = []
+        for j in range(n):  # an atlas of cards, rows from the bottom (v up)
+            for i in range(n):
+                cell = rgba[(n - 1 - j) * size:(n - j) * size, i * size:(i + 1) * size]
+                alpha = cell[..., 3]
+                # leaves and gaps, as opaque as the foliage's card count assumes
+                assert (alpha > 0).mean() == pytest.approx(STYLES[kind].fill, abs=0.02)
+                assert alpha[-1].any()  # the stem reaches the card's bottom edge (v = 0)
+                # nothing touches the cell's other edges (no bleeding between cells)
+                assert not alpha[0].any() and not alpha[:, 0].any() and not alpha[:, -1].any()
+                means.append(cell[alpha > 0][:, :3].mean(0))
+        # the variants differ in colour: hue and value, a few percent at least
+        means = np.array(means)
+        assert np.ptp(means.sum(1)) > 0.1 * means.sum(1).mean()
+        hue = means / means.sum(1, keepdims=True)
+        assert np.ptp(hue[:, 0]) > 0.02 and np.ptp(hue[:, 2]) > 0.02
     assert textures.texture_for("leaf2").name == "leaf2.png"  # conifers: needle cards
     assert textures.texture_for("object") is None
 

@@ -1,6 +1,7 @@
 """Tree geometry for the exporters: bark as generalized cylinders along each
-limb, leaves as two crossed quads per leafy segment, skinning weights that
-make the bark bend smoothly at joints, and linear-blend posing.
+limb, foliage as cards skinned rigidly to their leafy segment (foliage.py),
+skinning weights that make the bark bend smoothly at joints, and
+linear-blend posing.
 
 All coordinates are the bake's world frame: metres, Z up. The exporters
 convert to their own axes.
@@ -28,10 +29,13 @@ import numpy as np
 
 from ..bake import TreeBake
 from ..rotations import apply, cross, matrices_from_quaternions
+from .foliage import cards
 
 BARK_COLOUR = (0.36, 0.25, 0.16)  # linear RGB
-LEAF_COLOURS = {1: (0.22, 0.48, 0.16), 2: (0.14, 0.34, 0.12), 3: (0.55, 0.55, 0.16),
-                4: (0.62, 0.30, 0.10)}
+# linear RGB, the albedo of leaves in leaf (measured green leaves reflect
+# 0.05-0.1 in red and blue, 0.1-0.2 in green; needles darker and bluer)
+LEAF_COLOURS = {1: (0.10, 0.22, 0.055), 2: (0.045, 0.10, 0.06), 3: (0.16, 0.24, 0.07),
+                4: (0.50, 0.21, 0.05)}
 OBJECT_COLOUR = (0.55, 0.45, 0.35)
 BREAK_GAP = 0.01  # m: a joint whose child base leaves the parent by more is broken
 
@@ -43,7 +47,7 @@ def leaf_colour(kind: int) -> tuple[float, float, float]:
 @dataclass(frozen=True)
 class MeshOptions:
     """radial: vertices around a ring (>= 3); rings: rings per segment (>= 1);
-    leaves: emit leaf quads; min_radius: m, thinner twigs are drawn this
+    leaves: emit foliage cards; min_radius: m, thinner twigs are drawn this
     thick; bark_tile: m of limb length per bark texture repeat (V)."""
 
     radial: int = 8
@@ -333,34 +337,11 @@ def _bark(tree: TreeBake, opts: MeshOptions, broken: np.ndarray):
     return positions, normals, uvs, joints, weights, faces
 
 
-# ---------------------------------------------------------------------------
-# leaves
-
-
-def _leaves(tree: TreeBake, segs: np.ndarray):
-    """Two crossed quads per segment in `segs`, centred on the segment's
-    midpoint, edge = leaf_size; UV v runs along the segment (stem at v=0)."""
-    p0 = tree.points[tree.seg_start[segs]].astype(np.float64)
-    p1 = tree.points[tree.seg_end[segs]].astype(np.float64)
-    a = _unit(p1 - p0)
-    u = _perpendicular(a)
-    w = cross(a, u)
-    h = 0.5 * tree.leaf_size[segs].astype(np.float64)[:, None]
-    c = 0.5 * (p0 + p1)
-    quads = []
-    for side, nrm in ((u, -w), (w, u)):  # normal = the winding's (side x axis)
-        corners = [c - a * h - side * h, c - a * h + side * h, c + a * h + side * h,
-                   c + a * h - side * h]
-        quads.append((np.stack(corners, 1), np.broadcast_to(nrm[:, None, :], (len(segs), 4, 3))))
-    n = len(segs)
-    pos = np.concatenate([q[0] for q in quads], axis=1).reshape(-1, 3)  # (n*8, 3)
-    nrm = np.concatenate([q[1] for q in quads], axis=1).reshape(-1, 3)
-    uv = np.tile([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (2 * n, 1))
-    base = (np.arange(2 * n) * 4)[:, None]
-    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
-    joints = np.stack([np.repeat(segs, 8), np.repeat(segs, 8)], 1)
-    weights = np.tile([1.0, 0.0], (8 * n, 1))
-    return pos, nrm, uv, joints, weights, faces
+def tree_seed(tree: TreeBake) -> int:
+    """The seed a tree grew from (its bake's info), 0 if it has none: the
+    foliage's placement follows it."""
+    seed = tree.info.get("seed")
+    return int(seed) if isinstance(seed, (int, np.integer)) else 0
 
 
 def leaf_material(kind: int) -> str:
@@ -389,10 +370,19 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
     arrays = [(pos, nrm, uv, jnt, wts)]
     offset = len(pos)
     if opts.leaves:
-        for kind in np.unique(tree.leaf[tree.leaf > 0]):
+        leafy = tree.leaf > 0
+        centre = 0.5 * (tree.points[tree.seg_start[leafy]] +
+                        tree.points[tree.seg_end[leafy]]).astype(np.float64).mean(0) \
+            if leafy.any() else None
+        for kind in np.unique(tree.leaf[leafy]):
             segs = np.nonzero(tree.leaf == kind)[0]
-            lp, ln, lu, lj, lw, lf = _leaves(tree, segs)
-            parts.append(MeshPart(leaf_material(kind), lf + offset, leaf_colour(kind), double_sided=True))
+            lp, ln, lu, lj, lw, lf, _ = cards(
+                tree.points[tree.seg_start[segs]].astype(np.float64),
+                tree.points[tree.seg_end[segs]].astype(np.float64),
+                tree.leaf_size[segs].astype(np.float64), segs, int(kind), tree_seed(tree),
+                centre)
+            parts.append(MeshPart(leaf_material(kind), lf + offset, leaf_colour(kind),
+                                  double_sided=True))
             arrays.append((lp, ln, lu, lj, lw))
             offset += len(lp)
     cat = [np.concatenate(x) for x in zip(*arrays)]

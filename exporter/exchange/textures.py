@@ -23,6 +23,7 @@ from functools import cache
 import numpy as np
 from PIL import Image, ImageDraw
 
+from .foliage import ATLAS
 from .mesh import BARK_COLOUR, leaf_colour
 
 BARK_SIZE = (256, 512)  # px: u (around) x v (along)
@@ -168,34 +169,46 @@ def _twig(draw, rng, x0, y0, length, angle, width, colour):
     return pts
 
 
-def _card(kind: int) -> Image.Image:
+# per atlas cell (foliage.ATLAS^2 of them): a tint (linear RGB multipliers: hue)
+# and a value; a card picks its cell by the tree's seed (foliage.py)
+VARIANTS = ((1.00, 1.00, 1.00, 1.00),  # the species' colour
+            (1.22, 1.04, 0.70, 1.08),  # yellower, lighter (sunlit, young leaves)
+            (0.80, 0.97, 1.15, 0.86),  # bluer, darker (shade leaves)
+            (1.08, 0.94, 0.86, 0.78))  # browner, darker (older leaves)
+
+
+def _card(kind: int, variant: int = 0) -> Image.Image:
+    """One card of leaf type `kind` in colour `variant` (VARIANTS), CARD_SIZE
+    px square: leaves where alpha is 255, the leaves' mean colour at alpha 0."""
     s = 2 * CARD_SIZE  # drawn at 2x, box-reduced: softer edges, still a crisp mask
     image = Image.new("RGBA", (s, s), (0, 0, 0, 0))
     draw = ImageDraw.Draw(image)
-    rng = np.random.default_rng(SEED + kind)
-    colour = srgb8(leaf_colour(kind)).astype(np.float64)
+    rng = np.random.default_rng([SEED, kind, variant])
+    tint = VARIANTS[variant % len(VARIANTS)]
+    colour = srgb8(np.asarray(leaf_colour(kind)) * np.asarray(tint[:3]) * tint[3]
+                   ).astype(np.float64)
     stem = _shade(srgb8(np.asarray(BARK_COLOUR) * 0.8), 1.0)
     style = STYLES.get(kind, "broadleaf")
     up = -math.pi / 2  # image y points down; the stem rises from the bottom edge
-    main = _twig(draw, rng, s / 2, s - 1, 0.92 * s, up, 0.012 * s, stem)
+    main = _twig(draw, rng, s / 2, s - 1, 0.86 * s, up, 0.012 * s, stem)
     if style == "needles":
-        sprigs = [main] + [_twig(draw, rng, x, y, rng.uniform(0.35, 0.48) * s,
-                                 a + side * rng.uniform(0.5, 0.8), 0.006 * s, stem)
-                           for i, (x, y, a) in enumerate(main[2:11])
-                           for side in ((-1, 1)[i % 2],)]
+        # a spray: side shoots from every node of the leader, both sides, and
+        # needles all along every shoot, dense enough to keep its cover in the
+        # smaller mipmaps of an alpha-cutout material
+        sprigs = [main] + [_twig(draw, rng, x, y, rng.uniform(0.3, 0.46) * s * (1.1 - 0.5 * i / 11),
+                                 a + side * rng.uniform(0.7, 1.0), 0.006 * s, stem)
+                           for i, (x, y, a) in enumerate(main[1:12]) for side in (-1, 1)]
         for twig in sprigs:
-            # dense and thick: a sparse card would vanish in the smaller mipmaps of
-            # an alpha-cutout material (coverage averages below the 0.5 cutoff)
             for x, y, a in twig[1:]:
                 for side in (-1, 1):
-                    for _ in range(6):
+                    for _ in range(7):
                         na = a + side * rng.uniform(0.5, 1.2)
                         ln = rng.uniform(0.05, 0.08) * s
                         x0, y0 = x + rng.uniform(-10, 10), y + rng.uniform(-10, 10)
-                        c = _shade(colour, rng.uniform(0.75, 1.25))
+                        c = _shade(colour, rng.uniform(0.75, 1.2))
                         draw.line([(round(x0), round(y0)),
                                    (round(x0 + math.cos(na) * ln), round(y0 + math.sin(na) * ln))],
-                                  fill=c, width=max(2, round(0.009 * s)))
+                                  fill=c, width=max(2, round(0.01 * s)))
     elif style == "leaflets":
         for x, y, a in main[1:]:
             for side in (-1, 1):
@@ -204,26 +217,28 @@ def _card(kind: int) -> Image.Image:
                 draw.polygon(_leaf_outline(x, y, ln, 0.034 * s, na, 10),
                              fill=_shade(colour, rng.uniform(0.8, 1.2)))
     else:  # broadleaf: a cluster, alternate ovate leaves on a twig and its side shoots
-        twigs = [main[:-2]] + [_twig(draw, rng, x, y, rng.uniform(0.3, 0.42) * s,
-                                     a + (-1, 1)[i % 2] * rng.uniform(0.5, 0.8), 0.007 * s,
+        twigs = [main[:-1]] + [_twig(draw, rng, x, y, rng.uniform(0.3, 0.45) * s * (1.1 - i / 12),
+                                     a + (-1, 1)[i % 2] * rng.uniform(0.55, 0.9), 0.007 * s,
                                      stem)
-                               for i, (x, y, a) in enumerate(main[3:10:2])]
+                               for i, (x, y, a) in enumerate(main[2:11])]
         for twig in twigs:
-            for i, (x, y, a) in enumerate(twig[3::2]):
+            for i, (x, y, a) in enumerate(twig[2:]):
                 side = -1 if i % 2 else 1
-                na = a + side * rng.uniform(0.5, 0.9)
-                ln = rng.uniform(0.14, 0.2) * s
-                draw.polygon(_leaf_outline(x, y, ln, ln * 0.3, na),
-                             fill=_shade(colour, rng.uniform(0.8, 1.2)))
+                na = a + side * rng.uniform(0.45, 0.95)
+                ln = rng.uniform(0.12, 0.17) * s
+                draw.polygon(_leaf_outline(x, y, ln, ln * 0.32, na),
+                             fill=_shade(colour, rng.uniform(0.8, 1.15)))
                 draw.line([(round(x), round(y)), (round(x + math.cos(na) * ln * 0.85),
                                                   round(y + math.sin(na) * ln * 0.85))],
-                          fill=_shade(colour, 0.6), width=max(2, round(0.003 * s)))
+                          fill=_shade(colour, 0.8), width=max(2, round(0.003 * s)))
             x, y, a = twig[-1]
-            draw.polygon(_leaf_outline(x, y, 0.16 * s, 0.05 * s, a), fill=_shade(colour, 1.05))
+            draw.polygon(_leaf_outline(x, y, 0.15 * s, 0.05 * s, a), fill=_shade(colour, 1.05))
     small = image.reduce(2)
     alpha = np.asarray(small)[..., 3]
     rgba = np.asarray(small).copy()
     rgba[..., 3] = np.where(alpha >= 128, 255, 0)  # a clean cutout mask
+    # a clear frame but for the stem's bottom edge: no leaf touches the next atlas cell
+    rgba[:2, :, 3] = rgba[:, :2, 3] = rgba[:, -2:, 3] = 0
     # transparent texels carry the leaves' mean colour, not black: mipmaps and
     # filtering at the cutout's edge then blend toward green, not a dark fringe
     solid = rgba[..., 3] > 0
@@ -232,10 +247,22 @@ def _card(kind: int) -> Image.Image:
     return Image.fromarray(rgba, "RGBA")
 
 
+def _atlas(kind: int) -> Image.Image:
+    """foliage.ATLAS x foliage.ATLAS cards of leaf type `kind`, one colour
+    variant each: cell (i, j) (column i, row j from the bottom: UV v up) is
+    variant j * ATLAS + i."""
+    n = ATLAS
+    atlas = Image.new("RGBA", (n * CARD_SIZE, n * CARD_SIZE))
+    for j in range(n):
+        for i in range(n):
+            atlas.paste(_card(kind, j * n + i), (i * CARD_SIZE, (n - 1 - j) * CARD_SIZE))
+    return atlas
+
+
 @cache
 def leaf_texture(kind: int) -> Texture:
-    """Leaf card of leaf type `kind` (1 broadleaf, 2 conifer needles, 3 palm
-    leaflets, 4 autumn broadleaf): colour where the leaves are, alpha 0
-    elsewhere."""
+    """Leaf cards of leaf type `kind` (1 broadleaf, 2 conifer needles, 3 palm
+    leaflets, 4 autumn broadleaf), an atlas of ATLAS x ATLAS colour
+    variants (_atlas): colour where the leaves are, alpha 0 elsewhere."""
     name = "leaf.png" if kind == 1 else f"leaf{kind}.png"
-    return Texture(name, _png(_card(kind)), repeat=False, cutout=True)
+    return Texture(name, _png(_atlas(kind)), repeat=False, cutout=True)

@@ -52,8 +52,10 @@ PHYSICS = table(
         math.inf, doc_default="∞ (never)"),
     Key("anchor", "root-plate anchorage moment (uprooting)", "N·m", math.inf, 0.0, math.inf,
         doc_default="∞ (never)"),
-    Key("leaf size", "edge of a leaf card (two crossed cards per leafy segment; a card "
-        "stands for a cluster of leaves)", "m", 0.15, 0.0, 10.0),
+    Key("leaf size", "the foliage of a leafy segment: the physics counts two cards of this "
+        "edge (a card stands for a cluster of leaves); the exported foliage draws many cards "
+        "of a few times this edge, skinned to the segment (docs/look.md)", "m", 0.15, 0.0,
+        10.0),
     Key("leaf mass", "fresh foliage mass per card area (it and the cards' area are the "
         "foliage's mass and drag area)", "kg/m²", 0.2, 0.0, 10.0),
     Key("drag", "drag coefficient of bare wood", "–", 1.2, 0.0, 10.0),

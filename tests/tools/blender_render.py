@@ -30,8 +30,10 @@ def _arg(name, default):
 
 
 # docs/formats.md's plain material colours (linear RGB), for Alembic imports
-COLOURS = {"bark": (0.36, 0.25, 0.16), "leaf": (0.22, 0.48, 0.16), "leaf2": (0.14, 0.34, 0.12),
-           "leaf3": (0.55, 0.55, 0.16), "leaf4": (0.62, 0.30, 0.10), "object": (0.55, 0.45, 0.35)}
+# (exchange/mesh.py's BARK_COLOUR, LEAF_COLOURS and OBJECT_COLOUR: Blender's
+# Python cannot import treebake; test_blender checks the two agree)
+COLOURS = {"bark": (0.36, 0.25, 0.16), "leaf": (0.10, 0.22, 0.055), "leaf2": (0.045, 0.10, 0.06),
+           "leaf3": (0.16, 0.24, 0.07), "leaf4": (0.50, 0.21, 0.05), "object": (0.55, 0.45, 0.35)}
 
 
 def _import_abc(path: str) -> None:
