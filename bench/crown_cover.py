@@ -317,9 +317,15 @@ def main() -> int:
         head += f" {'half-res diff':>13}"
     print(head + f" {'triangles':>9} {'pixel mm':>8}")
     t0 = time.perf_counter()
+    from treebake.errors import TreebakeError
+
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            glb = export_rest_glb(name, Path(tmp))
+            try:
+                glb = export_rest_glb(name, Path(tmp))
+            except TreebakeError as exc:
+                print(f"crown_cover: {exc}", file=sys.stderr)
+                return 2
             png = Path(args.png) / f"{Path(name).stem}" if args.png else None
             r = measure(glb, args.pixels, png)
             row = {"species": name, "front": round(r["front"]["cover"], 4),

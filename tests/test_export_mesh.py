@@ -135,6 +135,11 @@ def test_foliage_follows_the_trees_seed_and_only_it():
     assert one.positions.shape == other.positions.shape  # as many cards: the counts are geometry's
     assert np.array_equal(one.positions[:bark], other.positions[:bark])  # the same bark
     assert not np.array_equal(one.positions[bark:], other.positions[bark:])
+    # where the tree stands does not decide its foliage: moved, the same cards, moved
+    shift = np.array([37.25, -12.5, 0.0])
+    moved = tree_mesh(replace(tree, points=tree.points + shift, info={"seed": 7}))
+    assert moved.n_vertices == one.n_vertices
+    assert np.allclose(moved.positions, one.positions + shift, atol=1e-9)
 
 
 def test_broken_joints_split_the_skin():

@@ -16,8 +16,9 @@ side, an optical depth of `depth` (an expected cover 1 - exp(-depth)):
     n = depth x 2 e (L + e) / (0.5 x fill x e^2)
 
 with `fill` the fraction of the card's texture that is opaque and 0.5 the
-mean |cos| of a randomly turned card; n is at least 1 and at most
-MAX_CARDS. Counts, places and turns come from the tree's seed (numpy's
+mean |cos| of a randomly turned card, divided by sqrt(k) where k leafy
+segments have their midpoints in the same cube of edge 2 e (card_counts);
+n is at least 1 and at most MAX_CARDS. Counts, places and turns come from the tree's seed (numpy's
 PCG64, unit vectors by rejection in the cube: square roots and divisions
 only, no transcendental functions, so the same seed gives the same bytes
 on every machine).
@@ -85,10 +86,11 @@ def _across(v: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int) -> np.ndarray:
     """(N,) cards per leafy segment (base p0, tip p1 (N, 3) m, leaf size
-    (N,) m): the sleeve's count (module doc), shared among the leafy
+    (N,) m): the sleeve's count (module doc) over sqrt(k), k the leafy
     segments whose midpoints fall in the same cube of edge 2 e (e the
-    median card edge), so crowded twigs (a willow's curtain) do not pile
-    up cards where one segment's already cover."""
+    median card edge; cubes from the midpoints' mean, so a tree moved in a
+    scene keeps its counts), so crowded twigs (a willow's curtain) do not
+    pile up cards where their neighbours' already cover."""
     st = style(kind)
     e = st.edge * np.asarray(size, np.float64)
     length = np.sqrt(((p1 - p0) ** 2).sum(1))
@@ -98,7 +100,8 @@ def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int) -> 
     n = st.depth * sleeve / safe
     cell = 2.0 * float(np.median(e)) if len(e) else 1.0
     if cell > 0:
-        key = np.floor(0.5 * (p0 + p1) / cell).astype(np.int64)
+        mid = 0.5 * (p0 + p1)
+        key = np.floor((mid - mid.mean(0)) / cell).astype(np.int64)
         _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
         n = n / np.sqrt(count[inverse.reshape(-1)])
     return np.clip(np.rint(n), 1, MAX_CARDS).astype(np.int64)

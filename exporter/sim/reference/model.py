@@ -156,8 +156,10 @@ class ReferenceModels:
         self._envelopes()
 
     def _envelopes(self) -> None:
-        """Per bone, the capsule around its bark rings and leaf cards (the
-        mesh exchange/mesh.py draws): radius `reach` (m) about the line from
+        """Per bone, the capsule around its bark rings and the physics' leaf
+        cards (two of `leaf size` per leafy segment, rig.py; the exporters'
+        foliage reaches farther and is not held up, docs/look.md): radius
+        `reach` (m) about the line from
         `reach_from` (m along the bone from its pivot) to its tip. Where it
         would reach below the ground at the pivot at rest (a stem's base),
         it starts a radius up the bone, so that it only touches the ground
