@@ -104,7 +104,7 @@ def cmd_bake(args) -> int:
                           scheduler=args.scheduler, path=path)
         exported = None
         if opts is not None and opts.formats:
-            exported = run_export(bake, path, args.out, out.name, opts, args, workers)
+            exported = run_export(bake, path, args.out, out.name, opts, args)
     t = bake.timing
     # from each tree's smallest entries: the bake is not read again
     sizes = [(len(tree_field(bake.trees, i, "seg_start")),
@@ -154,13 +154,12 @@ def export_options(args, allow_none: bool = False):
         trees_per_file=args.trees_per_file, usd_layers=args.usd_layers)
 
 
-def run_export(bake, bake_path, out, name, opts, args, workers: int = 1):
+def run_export(bake, bake_path, out, name, opts, args):
     """export_bake into OUT/<name>/ with stage progress unless --quiet."""
     from .export import export_bake
 
     progress = None if getattr(args, "quiet", False) else stage_progress()
-    return export_bake(bake, out, name, opts, bake_path=bake_path, progress=progress,
-                       workers=workers)
+    return export_bake(bake, out, name, opts, bake_path=bake_path, progress=progress)
 
 
 def export_summary(report) -> dict:
@@ -220,8 +219,6 @@ def print_export(report) -> None:
 
 
 def cmd_export(args) -> int:
-    import os
-
     from .bake_file import load_bake
     from .export import check_options
     from .fileio import job_lock
@@ -234,7 +231,7 @@ def cmd_export(args) -> int:
     bake = load_bake(path, lazy=True)  # the writers read a tree at a time
     name = job_name(args.name or str(bake.meta.get("scene") or "bake"))
     with job_lock(Path(args.out) / name):
-        report = run_export(bake, path, args.out, name, opts, args, os.cpu_count() or 1)
+        report = run_export(bake, path, args.out, name, opts, args)
     if args.json:
         print(json.dumps(export_summary(report)))
     else:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -18,7 +18,7 @@ from .bake import FAST_TURN_DEG, Bake
 from .bake_file import StoredTrees, check_finite, tree_field
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
-from .exchange.mesh import MeshOptions, TreeFacts, TreeMesh, TreeMeshes, part_materials_of
+from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, part_materials_of, tree_mesh
 from .fileio import atomic_path, write_bytes, write_text
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
@@ -132,6 +132,64 @@ def sha256(path: Path) -> str:
 _MANIFEST_ORDER = ("tool", "job", "inputs", "settings", "frames", "sizes")
 
 
+@dataclass(frozen=True)
+class TreeFacts:
+    """What the manifest says of one tree, noted when its mesh is built."""
+
+    inputs: dict  # name, grammar, its hash, seed, segments, static
+    segments: int
+    static: bool
+    extra_samples: int
+    leaf_quads: int
+    vertices: int
+    triangles: int
+    broken_joints: int
+
+
+class TreeMeshes(Sequence[TreeMesh]):
+    """Every tree's mesh (exchange.mesh.tree_mesh), built when a writer asks
+    for it (the last one kept), so an export holds one tree's mesh, not the
+    shot's; what the manifest says of each tree is noted as it is built."""
+
+    def __init__(self, bake: Bake, opts: MeshOptions):
+        self.bake, self.opts = bake, opts
+        self.facts: dict[int, TreeFacts] = {}
+        self._last: tuple[int, TreeMesh] | None = None
+
+    def __len__(self) -> int:
+        return len(self.bake.trees)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        i = range(len(self))[i]
+        if self._last is None or self._last[0] != i:
+            tree = self.bake.trees[i]
+            broken = broken_joints(tree)
+            mesh = tree_mesh(tree, self.opts, broken)
+            self.facts[i] = TreeFacts(
+                {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
+                 "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
+                 "segments": tree.n_segments, "static": tree.static},
+                tree.n_segments, tree.static, len(tree.extra_times),
+                sum(len(p.faces) // 2 for p in mesh.parts if p.material.startswith("leaf")),
+                mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
+            self._last = (i, mesh)
+        return self._last[1]
+
+    def __iter__(self) -> Iterator[TreeMesh]:
+        for i in range(len(self)):
+            yield self[i]
+
+    def all_facts(self) -> list[TreeFacts]:
+        """Every tree's facts, in order (building the meshes no writer
+        asked for)."""
+        for i in range(len(self)):
+            if i not in self.facts:
+                self[i]
+        return [self.facts[i] for i in range(len(self))]
+
+
 def build_meshes(bake: Bake, opts: MeshOptions) -> tuple[list[TreeMesh], int]:
     """Every tree's mesh at once, and how many joints broke (split in the
     mesh): for scripts and checks; exports build them one at a time."""
@@ -209,17 +267,13 @@ class _Job:
     textures: dict
     maps: dict
     tick: Progress
-    bake_path: Path | None = None
-    workers: int = 1
 
 
 def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
                 opts: ExportOptions | None = None, bake_path: str | Path | None = None,
-                progress: Progress | None = None, workers: int = 1) -> ExportReport:
+                progress: Progress | None = None) -> ExportReport:
     """Write the formats of `opts` into `out/<name>/` (name: the bake's
-    scene) and its manifest.json. Same bake and options -> same bytes.
-    `workers` processes write USD tree layers when the bake was read from
-    `bake_path` (the same bytes with any number)."""
+    scene) and its manifest.json. Same bake and options -> same bytes."""
     opts = opts or ExportOptions()
     check_options(opts)
     if not opts.formats:
@@ -241,8 +295,7 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     first = frame_start(bake, opts)
     textures = _textures(bake, opts)
     maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
-    job = _Job(bake, meshes, folder, name, opts, first, textures, maps, tick, bake_path,
-               max(1, workers))
+    job = _Job(bake, meshes, folder, name, opts, first, textures, maps, tick)
     files = _write_texture_pngs(job)
     files += _write_gltf(job, manifest)
     files += _write_obj(job, manifest)
@@ -343,8 +396,7 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
                 layers = "tree" if len(job.bake.trees) > USD_LAYER_TREES else "one"
             res = export_usd(job.bake, job.meshes, job.folder, job.name, ascii=fmt == "usda",
                              progress=lambda d, t, f=fmt: job.tick(f, d, t),
-                             frame_start=job.first, maps=job.maps, layers=layers,
-                             workers=job.workers, bake_path=job.bake_path)
+                             frame_start=job.first, maps=job.maps, layers=layers)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))

@@ -2,8 +2,6 @@
 simulation finishes each chunk, read back tree by tree; the same bytes as
 the in-memory bake saved whole; nothing left behind by a failure."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -209,34 +207,3 @@ def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(strea
     for name, t in moving.items():  # within the keyframe reduction's tolerance
         assert np.abs(seen[name].positions - t.positions).max() < 0.004
     assert rep.manifest["settings"]["trees_per_file"] == 40
-
-
-def test_usd_tree_layers_written_by_two_processes_are_the_same_bytes(streamed, tmp_path,
-                                                                       monkeypatch):
-    pytest.importorskip("pxr")
-    from treebake.exchange import usd
-    from treebake.export import ExportOptions, export_bake
-
-    path, _, _ = streamed
-    in_this_process = []
-    real = usd._write_layer
-
-    def counted(*args):  # counts only the layers this process writes
-        in_this_process.append(args[2])
-        return real(*args)
-
-    monkeypatch.setattr(usd, "_write_layer", counted)
-    opts = ExportOptions(formats=("usd",), usd_layers="tree")
-    files = {}
-    for workers in (1, 2):
-        rep = export_bake(load_bake(path, lazy=True), tmp_path / str(workers), "f", opts,
-                          bake_path=path, workers=workers)
-        folder = tmp_path / str(workers) / "f"
-        files[workers] = {p.relative_to(folder): p.read_bytes()
-                          for p in sorted(folder.rglob("*")) if p.is_file()}
-        assert rep.manifest["sizes"]["triangles"] > 0
-        manifests = files[workers].pop(Path("manifest.json"))
-        files[workers]["manifest"] = manifests
-    count = len(load_bake(path, lazy=True).trees)
-    assert in_this_process == list(range(count))  # workers=1 here; workers=2 in two others
-    assert files[1] == files[2] and len(files[1]) > count

@@ -23,14 +23,11 @@ segment, capped, so debris carries no stretched skin.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-
-from pathlib import Path
 
 import numpy as np
 
-from ..bake import Bake, TreeBake
+from ..bake import TreeBake
 from ..rotations import apply, cross, matrices_from_quaternions
 from .foliage import cards
 
@@ -390,64 +387,6 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
             offset += len(lp)
     cat = [np.concatenate(x) for x in zip(*arrays)]
     return TreeMesh(cat[0], _unit(cat[1]), cat[2], cat[3].astype(np.int64), cat[4], parts)
-
-
-@dataclass(frozen=True)
-class TreeFacts:
-    """What the manifest says of one tree, noted when its mesh is built."""
-
-    inputs: dict  # name, grammar, its hash, seed, segments, static
-    segments: int
-    static: bool
-    extra_samples: int
-    leaf_quads: int
-    vertices: int
-    triangles: int
-    broken_joints: int
-
-
-class TreeMeshes(Sequence[TreeMesh]):
-    """Every tree's mesh (exchange.mesh.tree_mesh), built when a writer asks
-    for it (the last one kept), so an export holds one tree's mesh, not the
-    shot's; what the manifest says of each tree is noted as it is built."""
-
-    def __init__(self, bake: Bake, opts: MeshOptions):
-        self.bake, self.opts = bake, opts
-        self.facts: dict[int, TreeFacts] = {}
-        self._last: tuple[int, TreeMesh] | None = None
-
-    def __len__(self) -> int:
-        return len(self.bake.trees)
-
-    def __getitem__(self, i):
-        if isinstance(i, slice):
-            return [self[k] for k in range(*i.indices(len(self)))]
-        i = range(len(self))[i]
-        if self._last is None or self._last[0] != i:
-            tree = self.bake.trees[i]
-            broken = broken_joints(tree)
-            mesh = tree_mesh(tree, self.opts, broken)
-            self.facts[i] = TreeFacts(
-                {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
-                 "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
-                 "segments": tree.n_segments, "static": tree.static},
-                tree.n_segments, tree.static, len(tree.extra_times),
-                sum(len(p.faces) // 2 for p in mesh.parts if p.material.startswith("leaf")),
-                mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
-            self._last = (i, mesh)
-        return self._last[1]
-
-    def __iter__(self) -> Iterator[TreeMesh]:
-        for i in range(len(self)):
-            yield self[i]
-
-    def all_facts(self) -> list[TreeFacts]:
-        """Every tree's facts, in order (building the meshes no writer
-        asked for)."""
-        for i in range(len(self)):
-            if i not in self.facts:
-                self[i]
-        return [self.facts[i] for i in range(len(self))]
 
 
 # ---------------------------------------------------------------------------

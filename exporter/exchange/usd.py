@@ -26,14 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from ..bake import Bake
-from ..bake_file import tree_field
 from ..errors import TreebakeError
 from ..fileio import write_bytes
 from ..names import joint_names
 from ..rotations import continuous, qnormalize
 from .anim import local_transforms
 from .axes import points_y_up, quats_y_up
-from .mesh import OBJECT_COLOUR, TreeMesh, TreeMeshes, object_mesh
+from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh
 
 
 def _pxr():
@@ -316,130 +315,46 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
                progress: Callable[[int, int], None] | None = None,
                frame_start: int = 1,
                maps: dict[str, tuple[str, bool]] | None = None,
-               layers: str = "one", workers: int = 1,
-               bake_path: str | Path | None = None) -> UsdResult:
+               layers: str = "one") -> UsdResult:
     """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
     frame f at time code frame_start + f; `maps`: material -> (texture
     path relative to the file, cutout) for the preview surfaces.
     `layers`: "one", the whole shot in that file; "tree", that file is a
     root stage whose trees are payloads, one layer per tree in
     `out/name.trees/` (a DCC opens the stage at once and loads trees on
-    demand; memory follows one tree). Tree layers are written by `workers`
-    processes when the bake is read from `bake_path` and `meshes` is a
-    mesh.TreeMeshes (each process reads its trees from the file; the
-    bytes are the same with any number)."""
+    demand; memory follows one tree)."""
     if layers not in ("one", "tree"):
         raise ValueError(f"layers must be 'one' or 'tree', got {layers!r}")
     ext = ".usda" if ascii else ".usd"
     w = _Writer(bake, name, frame_start, maps)
     result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
-    if layers == "one":
-        for i, mesh in enumerate(meshes):
+    folder = f"{name}.trees"
+    # a tree layer sits one folder down: its texture paths climb out of it
+    up = {m: (f"../{path}", cutout) for m, (path, cutout) in (maps or {}).items()}
+    checked = _layers_checked(len(meshes)) if check else set()
+    for i, mesh in enumerate(meshes):
+        if layers == "one":
             result.joints += w.tree(i, mesh)
-            if progress is not None:
-                progress(i + 1, len(meshes))
-    else:
-        job = LayerJob(Path(out) / f"{name}.trees", ext, frame_start,
-                       # a tree layer sits one folder down: its textures climb out of it
-                       {m: (f"../{path}", cutout) for m, (path, cutout) in (maps or {}).items()},
-                       frozenset(_layers_checked(len(meshes)) if check else ()))
-        prims = [w.unique(w.root, tree_field(bake.trees, i, "info_dict")["name"])
-                 for i in range(len(meshes))]
-        for done, layer in enumerate(_tree_layers(bake, meshes, prims, job, workers, bake_path)):
-            result.joints += layer.joints
-            result.subframe_codes += layer.subframe_codes
-            result.files.append(layer.file)
-            result.validation_errors += layer.errors
-            w.stage.DefinePrim(prims[layer.index]).GetPayloads().AddPayload(
-                f"./{job.folder.name}/{layer.file.name}")
-            if progress is not None:
-                progress(done + 1, len(meshes))
-        result.layers_checked = len(job.checked)
+        else:
+            prim = w.unique(w.root, bake.trees[i].name)
+            tw = _Writer(bake, prim.rsplit("/", 1)[1], frame_start, up, kind="component")
+            result.joints += tw.tree(i, mesh, tw.root)
+            result.subframe_codes += tw.subframe_codes
+            layer = Path(out) / folder / f"{prim.rsplit('/', 1)[1]}{ext}"
+            result.files.append(write_bytes(layer, tw.save(layer)))
+            if i in checked:
+                result.validation_errors += [f"{layer.name}: {e}" for e in validate(layer)]
+            w.stage.DefinePrim(prim).GetPayloads().AddPayload(f"./{folder}/{layer.name}")
+        if progress is not None:
+            progress(i + 1, len(meshes))
     w.objects()
     result.subframe_codes += w.subframe_codes
     path = Path(out) / f"{name}{ext}"
     result.files.append(write_bytes(path, w.save(path)))
     if check:
         result.validation_errors += validate(path, load=layers == "one")
+        result.layers_checked = len(checked) if layers == "tree" else 0
     return result
-
-
-@dataclass(frozen=True)
-class LayerJob:
-    """What writing tree layers needs: their folder, extension, the first
-    frame's number, material -> (texture path from the layer, cutout), and
-    which trees' layers are validated on their own."""
-
-    folder: Path
-    ext: str
-    frame_start: int
-    maps: dict
-    checked: frozenset
-
-
-@dataclass
-class Layer:
-    """One written tree layer: the tree, its file, joints and fractional
-    time codes written, validation errors, and its mesh's facts
-    (mesh.TreeFacts, for the manifest)."""
-
-    index: int
-    file: Path
-    joints: int
-    subframe_codes: int
-    errors: list[str]
-    facts: object
-
-
-TREES_PER_TASK = 50  # tree layers a worker process writes per task
-
-
-def _tree_layers(bake: Bake, meshes, prims: list[str], job: LayerJob, workers: int,
-                 bake_path: str | Path | None):
-    """Each tree's layer, in tree order: in this process, or in `workers`
-    processes that read their trees from `bake_path`."""
-    count = len(prims)
-    if workers <= 1 or bake_path is None or not isinstance(meshes, TreeMeshes) \
-            or count <= TREES_PER_TASK:
-        for i in range(count):
-            yield _write_layer(bake, meshes, i, prims[i], job)
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
-    blocks = [range(a, min(a + TREES_PER_TASK, count)) for a in range(0, count, TREES_PER_TASK)]
-    with ProcessPoolExecutor(max_workers=min(workers, len(blocks)), mp_context=ctx) as pool:
-        futures = [pool.submit(_write_layers, str(bake_path), meshes.opts, list(b),
-                               [prims[i] for i in b], job) for b in blocks]
-        for k in range(len(futures)):
-            fut, futures[k] = futures[k], None
-            for layer in fut.result():
-                meshes.facts[layer.index] = layer.facts
-                yield layer
-
-
-def _write_layers(bake_path: str, opts, indices: list[int], prims: list[str],
-                  job: LayerJob) -> list[Layer]:
-    """A worker's task: these trees' layers, read from the bake file."""
-    from ..bake_file import load_bake
-
-    bake = load_bake(bake_path, lazy=True)
-    meshes = TreeMeshes(bake, opts)
-    return [_write_layer(bake, meshes, i, prim, job) for i, prim in zip(indices, prims)]
-
-
-def _write_layer(bake: Bake, meshes, i: int, prim: str, job: LayerJob) -> Layer:
-    """Tree i's layer: its default prim is the tree, named as `prim` is."""
-    leaf = prim.rsplit("/", 1)[1]
-    tw = _Writer(bake, leaf, job.frame_start, job.maps, kind="component")
-    mesh = meshes[i]
-    joints = tw.tree(i, mesh, tw.root)
-    file = job.folder / f"{leaf}{job.ext}"
-    write_bytes(file, tw.save(file))
-    errors = [f"{file.name}: {e}" for e in validate(file)] if i in job.checked else []
-    facts = meshes.facts.get(i) if isinstance(meshes, TreeMeshes) else None
-    return Layer(i, file, joints, tw.subframe_codes, errors, facts)
 
 
 LAYERS_CHECKED = 20  # tree layers validated on their own, at most, spread over the shot
