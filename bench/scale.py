@@ -7,7 +7,9 @@ For each count and step (bake, then each export format): wall time, CPU
 time of the command and every process it started (reaped children
 included), the peak of the summed RSS of the command's whole process tree
 (sampled every 0.05 s from /proc), and the size of what it wrote. Cost per
-tree beside each, so flat scaling reads as a flat column.
+tree beside each, so flat scaling reads as a flat column. For USD, the
+seconds a fresh process takes to open the root stage with its payloads
+unloaded (`root_open_s` in the JSON).
 
     python bench/scale.py [--counts 250 1000 2500 5000 10000] [--formats usd glb]
                           [--workers 2] [--treebake PATH] [--json out/bench/scale.json]
@@ -110,9 +112,21 @@ def measure(treebake: str, count: int, formats: list[str], workers: int, duratio
         r = run([treebake, "export", str(bake), "--out", str(dest), "--format", fmt, "-q"], work)
         rows.append({"trees": count, "step": f"export {fmt}",
                      **_row(r, count, size_of(dest) - _textures(dest))})
+        if fmt == "usd":
+            rows[-1]["root_open_s"] = open_unloaded(dest / f"forest{count}" / f"forest{count}.usd")
         shutil.rmtree(dest)
     shutil.rmtree(out)
     return rows
+
+
+def open_unloaded(path: Path) -> float:
+    """Seconds to open a USD stage with its payloads unloaded, as a DCC
+    first opens a shot (in a fresh process: no layer cached)."""
+    code = ("import sys, time; from pxr import Usd; t = time.perf_counter(); "
+            "Usd.Stage.Open(sys.argv[1], Usd.Stage.LoadNone); print(time.perf_counter() - t)")
+    done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                          text=True, check=True)
+    return round(float(done.stdout.strip().splitlines()[-1]), 3)
 
 
 def _textures(folder: Path) -> int:

@@ -27,6 +27,7 @@ def test_script_reports_every_column(tmp_path):
     for r in rows:
         assert r["trees"] == 12 and r["size_mb"] > 0 and r["cpu_s"] > 0
         assert r["peak_rss_mb"] > 40  # a Python process with numpy loaded: tens of MB
+    assert rows[1]["root_open_s"] > 0
 
 
 def test_the_peak_counts_every_process_of_the_tree(tmp_path):
