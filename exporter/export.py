@@ -118,6 +118,10 @@ def check_extras(formats: tuple[str, ...]) -> None:
         from .exchange.abc import require
 
         require()
+    if "usd" in formats or "usda" in formats:
+        from .exchange.usd import require as require_usd
+
+        require_usd()
 
 
 def sha256(path: Path) -> str:

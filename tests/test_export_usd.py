@@ -83,3 +83,26 @@ def test_usd_is_byte_reproducible(boxes_usd, tmp_path):
     bake, meshes, res, _ = boxes_usd
     again = export_usd(bake, meshes, tmp_path, "job", check=False)
     assert again.files[0].read_bytes() == res.files[0].read_bytes()
+
+
+
+def test_without_usd_core_usd_is_exit_2_before_simulating(tmp_path):
+    """As for Alembic: a missing extra is named before any work (it was
+    exit 1 after the simulation)."""
+    import os
+    import subprocess
+    import sys
+
+    stub = tmp_path / "stub" / "pxr"
+    stub.mkdir(parents=True)
+    (stub / "__init__.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'pxr'\", name='pxr')\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(stub.parent),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "treebake.cli", "bake", "sapling", "--duration",
+                           "0.2", "--format", "glb,usd", "--out", str(out)],
+                          capture_output=True, text=True, env=env, check=False, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert "pip install 'treebake[usd]'" in done.stderr and "Traceback" not in done.stderr
+    assert "simulating" not in done.stderr and not out.exists()

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bake import Bake
-from ..errors import TreebakeError
+from ..errors import InputError, TreebakeError
 from ..fileio import write_bytes
 from ..names import joint_names
 from ..rotations import continuous, qnormalize
@@ -35,12 +35,23 @@ from .axes import points_y_up, quats_y_up
 from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh
 
 
+MISSING = "USD export needs the optional dependency usd-core: pip install 'treebake[usd]'"
+
+
+def require() -> None:
+    """Raise InputError naming `treebake[usd]` unless pxr imports (called
+    before any simulation when usd or usda is asked for)."""
+    try:
+        import pxr  # noqa: F401
+    except ImportError:
+        raise InputError(MISSING) from None
+
+
 def _pxr():
     try:
         from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
     except ImportError:  # pragma: no cover - depends on the install
-        raise TreebakeError("USD export needs the optional dependency usd-core: "
-                            "pip install 'treebake[usd]'") from None
+        raise TreebakeError(MISSING) from None
     return Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
 
