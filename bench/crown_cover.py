@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import struct
 import sys
 import tempfile
 import time
@@ -40,14 +39,15 @@ from PIL import Image
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+# the glb read back with treebake's own reader (every length checked)
+from treebake.exchange.gltf_read import _accessor, _load as _read_glb  # noqa: E402
+
 CROWN_FROM = 0.35  # the crown: the silhouette above this fraction of the height
 SPECIES = ("oak", "spruce", "willow", "sapling", "forest/broadleaf", "forest/birch",
            "forest/conifer")
 TARGETS = {"spruce": 0.75, "forest/conifer": 0.75}  # conifers; broadleaf species 0.70
 BROADLEAF_TARGET = 0.70
 VIEWS = {"front": (0, 2), "side": (1, 2)}  # Z-up world axes: (right, up) of each view
-_DTYPES = {5126: np.float32, 5123: np.uint16, 5125: np.uint32, 5121: np.uint8}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
 
 # ---------------------------------------------------------------------------
@@ -78,33 +78,6 @@ def _grammar_path(grammar: str) -> Path:
     from treebake.library import grammar_path
 
     return grammar_path(grammar)
-
-
-def _read_glb(path: Path) -> tuple[dict, bytes]:
-    data = path.read_bytes()
-    if data[:4] != b"glTF":
-        raise SystemExit(f"{path}: not a .glb")
-    length, _ = struct.unpack_from("<II", data, 12)
-    doc = json.loads(data[20:20 + length])
-    at = 20 + length
-    blob = b""
-    if at + 8 <= len(data):
-        blen, _ = struct.unpack_from("<II", data, at)
-        blob = data[at + 8:at + 8 + blen]
-    return doc, blob
-
-
-def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = np.dtype(_DTYPES[acc["componentType"]])
-    width = _WIDTH[acc["type"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    stride = view.get("byteStride", dtype.itemsize * width)
-    if stride != dtype.itemsize * width:
-        raise SystemExit("interleaved buffers are not read here")
-    raw = np.frombuffer(blob, dtype, acc["count"] * width, start)
-    return raw.reshape(acc["count"], width) if width > 1 else raw
 
 
 def _alpha_of(doc: dict, blob: bytes, material: dict) -> tuple[np.ndarray | None, float]:
