@@ -159,27 +159,34 @@ class StoredTrees(Sequence[TreeBake]):
         for i in range(self._count):
             yield self[i]
 
-    def field(self, i: int, key: str):
-        """One array of tree i (`leaf`, `width`, ...), or "info_dict" its
-        info (name, paths, grammar, ...: bake.TreeBake.info), reading
-        nothing else."""
+    def field(self, i: int, key: str) -> np.ndarray:
+        """One array of tree i (`leaf`, `width`, ...), reading nothing else."""
         try:
-            if key == "info_dict":
-                return _json(self._archive[f"tree{i}.info"])
             return self._archive[f"tree{i}.{key}"]
         except _DAMAGE as exc:
             raise InputError(f"{self._path}: not a readable treebake bake: damaged or "
                              f"truncated ({type(exc).__name__}: {exc})") from None
 
+    def info(self, i: int) -> dict:
+        """Tree i's info (TreeBake.info with its name and paths), reading
+        nothing else."""
+        return _json(self.field(i, "info"))
 
-def tree_field(trees: Sequence[TreeBake], i: int, key: str):
-    """One array of tree i of a bake's trees, or "info_dict" its info, in
-    memory or stored (then only that entry is read)."""
+
+def tree_field(trees: Sequence[TreeBake], i: int, key: str) -> np.ndarray:
+    """One array of tree i of a bake's trees, in memory or stored (then
+    only that array is read)."""
     if isinstance(trees, StoredTrees):
         return trees.field(i, key)
-    if key == "info_dict":
-        return dict(trees[i].info, name=trees[i].name)
     return getattr(trees[i], key)
+
+
+def tree_info(trees: Sequence[TreeBake], i: int) -> dict:
+    """Tree i's info with its name, in memory or stored (then only that
+    entry is read)."""
+    if isinstance(trees, StoredTrees):
+        return trees.info(i)
+    return dict(trees[i].info, name=trees[i].name)
 
 
 def _read_tree(z, i: int, times: np.ndarray, path: Path) -> TreeBake:

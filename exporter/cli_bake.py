@@ -60,7 +60,7 @@ def job_name(name: str) -> str:
 def cmd_bake(args) -> int:
     import os
 
-    from .bake_file import tree_field
+    from .bake_file import tree_field, tree_info
     from .export import check_options
     from .fileio import job_lock
     from .pipeline import bake_scene
@@ -108,7 +108,7 @@ def cmd_bake(args) -> int:
     t = bake.timing
     # from each tree's smallest entries: the bake is not read again
     sizes = [(len(tree_field(bake.trees, i, "seg_start")),
-              "static" in tree_field(bake.trees, i, "info_dict"))
+              "static" in tree_info(bake.trees, i))
              for i in range(len(bake.trees))]
     summary = {"bake": str(path), "trees": len(bake.trees),
                "simulated": sum(1 for _, static in sizes if not static),
