@@ -53,7 +53,7 @@ class Command:
 
 
 # names listed in help pages without importing the heavy modules on every
-# start; tests/test_cli_errors.py checks them against accuracy.py and stress.py
+# start; tests/test_cli_errors.py checks them against accuracy.py and stress_cases.py
 ACCURACY_SPECIES = ("sapling", "palm", "broadleaf", "conifer", "birch", "oak", "spruce",
                     "willow", "bamboo", "forest")
 ACCURACY_SCENARIOS = ("calm", "breeze", "gusty", "gale", "strong breeze", "boxes", "explosion")
@@ -65,7 +65,7 @@ STABILITY_CASES = ("stiff x1", "stiff x100", "stiff x10000", "mass 1:10^2", "mas
                    "felling willow", "felling palm", "felling bamboo", "crate breaks a stem",
                    "blast breaks branches", "tornado uproots", "10 min gusty", "10 min calm")
 
-# the stress suite's measured cost (stress.CPU_SECONDS; tests/test_stability_plan.py
+# the stress suite's measured cost (stress_plan.CPU_SECONDS; tests/test_stability_plan.py
 # checks these against it)
 STABILITY_FULL = ("1.9 h of CPU, as long in wall time on 2 idle cores (one process; the "
                   "felled willow alone takes 1.4 h)")

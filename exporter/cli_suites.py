@@ -37,7 +37,9 @@ def cmd_accuracy(args) -> int:
 
 def cmd_stability(args) -> int:
     from .cli_progress import CaseDisplay
-    from .stress import cases, cpu_seconds, quick_cases, stability
+    from .stress import cpu_seconds, stability
+    from .stress_cases import cases
+    from .stress_plan import quick_cases
 
     grammar = None
     if args.grammar:

@@ -11,10 +11,10 @@ from treebake.stress import (
     ENERGY_TOLERANCE,
     GAIN_TOLERANCE,
     GAP_TOLERANCE,
-    cases,
     event_growth,
     run,
 )
+from treebake.stress_cases import cases
 
 
 @pytest.fixture(scope="module")

@@ -144,7 +144,7 @@ def test_help_lists_the_valid_names():
     every command starts fast)."""
     from treebake import cli
     from treebake.accuracy import SCENARIOS, SPECIES
-    from treebake.stress import cases
+    from treebake.stress_cases import cases
 
     assert tuple(SPECIES) == cli.ACCURACY_SPECIES
     assert tuple(SCENARIOS) == cli.ACCURACY_SCENARIOS

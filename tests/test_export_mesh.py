@@ -12,7 +12,7 @@ import numpy as np
 from treebake.library import grammar_path
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
-from treebake.stress import cases
+from treebake.stress_cases import cases
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 

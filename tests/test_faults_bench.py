@@ -20,7 +20,8 @@ def test_every_fault_case_behaves_as_expected():
 @pytest.mark.parametrize("solver", ["planar", "full"])
 def test_the_other_stress_cases(solver):
     from test_accuracy_stability import STRESS
-    from treebake.stress import ENERGY_TOLERANCE, GAP_TOLERANCE, cases, run
+    from treebake.stress import ENERGY_TOLERANCE, GAP_TOLERANCE, run
+    from treebake.stress_cases import cases
 
     for case in cases(long=False):
         if case.name in STRESS:

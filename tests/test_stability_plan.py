@@ -1,7 +1,7 @@
 """`treebake stability --quick` (issue 42): a budgeted selection of the
 stress suite, most telling runs first, on the bundled trees or a grammar's,
 with one progress line per run. The plan is judged by the suite's own cost
-model (stress.CPU_SECONDS, measured); no test here times anything."""
+model (stress_plan.CPU_SECONDS, measured); no test here times anything."""
 
 import io
 import math
@@ -10,7 +10,7 @@ import sys
 import pytest
 
 SPECIES = ("sapling", "oak", "spruce", "willow", "palm", "bamboo")
-# the runs that found the most (stress.QUICK's head): every quick plan starts with them
+# the runs that found the most (stress_plan.QUICK's head): every quick plan starts with them
 TELLING = [("blast breaks branches", "planar", "draft"), ("tornado uproots", "planar", "draft"),
            ("felling", "planar", "draft"), ("wind 70 m/s", "planar", "draft")]
 
@@ -25,7 +25,7 @@ def runs_of(runs):
 @pytest.mark.parametrize("species", (None, *SPECIES))
 def test_quick_plan_fits_its_budget_and_keeps_the_telling_runs(species):
     from treebake.library import grammar_path
-    from treebake.stress import QUICK_BUDGET, quick_plan
+    from treebake.stress_plan import QUICK_BUDGET, quick_plan
 
     grammar = None if species is None else grammar_path(species)
     runs, left = quick_plan(grammar=grammar)
@@ -46,7 +46,7 @@ def test_quick_plan_fits_its_budget_and_keeps_the_telling_runs(species):
 
 
 def test_quick_plan_runs_the_most_telling_first():
-    from treebake.stress import quick_plan
+    from treebake.stress_plan import quick_plan
 
     runs, _ = quick_plan()
     assert runs_of(runs)[:len(TELLING)] == TELLING
@@ -58,7 +58,7 @@ def test_the_quick_plan_is_a_fraction_of_the_old_quick_selection():
     """--quick used to be every case but the long ones, on every solver and
     level (84 runs, 570 CPU s measured: 24 min wall on a busy 2-core
     machine); the budgeted plan takes a fraction of that."""
-    from treebake.stress import QUICK_BUDGET, plan, quick_plan
+    from treebake.stress_plan import QUICK_BUDGET, plan, quick_plan
 
     old = plan(long=False)
     assert len(old) == 84
@@ -70,7 +70,7 @@ def test_the_quick_plan_is_a_fraction_of_the_old_quick_selection():
 
 
 def test_a_large_grammar_is_trimmed_to_the_budget_and_says_so(tmp_path):
-    from treebake.stress import QUICK_BUDGET, plan_summary, quick_plan
+    from treebake.stress_plan import QUICK_BUDGET, plan_summary, quick_plan
 
     # a 2,000-segment tree: every run on it costs more than on the bundled ones
     path = tmp_path / "big.lsys"
@@ -90,7 +90,7 @@ def test_every_run_of_the_full_suite_is_estimated_and_the_help_says_its_duration
     """`treebake stability --help` says what the full suite and --quick
     cost, as the cost table has it."""
     from treebake import cli, cli_parser
-    from treebake.stress import QUICK_BUDGET, QUICK_LIMIT, plan, quick_plan
+    from treebake.stress_plan import QUICK_BUDGET, QUICK_LIMIT, plan, quick_plan
 
     runs = plan()
     assert all(math.isfinite(r.estimate) for r in runs), \
@@ -113,14 +113,14 @@ def test_every_run_of_the_full_suite_is_estimated_and_the_help_says_its_duration
 def test_the_measured_trees_are_the_bundled_ones():
     """The cost table scales by bones: a bundled grammar that changed makes
     its measurements stale."""
-    from treebake.stress import BONES, tree_bones
+    from treebake.stress_plan import BONES, tree_bones
 
     for tree, bones in BONES.items():
         assert tree_bones(f"species:{tree}") == bones, tree
 
 
 def test_a_grammar_takes_the_place_of_the_bundled_trees(tmp_path):
-    from treebake.stress import cases
+    from treebake.stress_cases import cases
 
     path = tmp_path / "tiny.lsys"
     path.write_text(TINY)
@@ -211,11 +211,11 @@ def test_quick_skips_what_would_run_past_the_limit_when_estimates_were_low(tmp_p
     """A grammar's runs are estimated from other trees, and the same load
     can cost one tree 8x another's: --quick starts no run that would end
     past QUICK_LIMIT by the CPU already spent."""
-    from treebake import stress
+    from treebake import stress, stress_plan
 
     def slow(case, solver, level="default", engine="auto"):
         return stress.Result(case.name, solver, case.what, True, 0.0, 0.0, 0.0, math.nan, 1.0,
-                             0.0, 0, 1.0, True, cpu=stress.QUICK_LIMIT)  # one run spends it
+                             0.0, 0, 1.0, True, cpu=stress_plan.QUICK_LIMIT)  # one run spends it
 
     monkeypatch.setattr(stress, "run", slow)
     heard = []
