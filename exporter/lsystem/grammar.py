@@ -18,7 +18,7 @@ from pathlib import Path
 from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
 from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
-from .symbols import AT_COMMANDS
+from .scan import RawModule, check_brackets, scan_modules
 from .toplevel import find_top, rfind_top, split_top
 
 Module = tuple[str, tuple[float, ...]]
@@ -126,99 +126,6 @@ class Grammar:
     constants: tuple[tuple[str, float], ...] = ()
     description: str = ""
     warnings: tuple[GrammarWarning, ...] = ()  # in file order
-
-
-# ---------------------------------------------------------------------------
-# module strings
-
-
-@dataclass
-class _RawModule:
-    symbol: str
-    col: int  # 0-based column of the symbol in the line
-    args: list[tuple[str, int]]  # (text, 0-based column)
-
-
-def scan_modules(text: str, col0: int, names: tuple[str, ...], err) -> list[_RawModule]:
-    """Split a module string into symbols with raw argument texts.
-
-    `names` are declared multi-character module names (longest first);
-    `@name` is always one module. `err(message, col)` builds the error.
-    """
-    out: list[_RawModule] = []
-    i, n = 0, len(text)
-    while i < n:
-        c = text[i]
-        if c.isspace():
-            i += 1
-            continue
-        if c in "),":
-            raise err(f"unexpected {c!r}", col0 + i)
-        if c == "(":
-            raise err("'(' must follow a module symbol", col0 + i)
-        if c == ":":
-            raise err("unexpected ':' (reserved for conditions and probabilities)", col0 + i)
-        start = i
-        symbol = None
-        if c == "@":
-            m = _NAME.match(text, i + 1)
-            if m:
-                symbol = "@" + m.group()
-                i = m.end()
-        if symbol is None:
-            for name in names:
-                if text.startswith(name, i):
-                    symbol = name
-                    i += len(name)
-                    break
-        if symbol is None:
-            symbol = c
-            i += 1
-        args: list[tuple[str, int]] = []
-        if i < n and text[i] == "(":
-            depth, j, arg_start = 1, i + 1, i + 1
-            while j < n and depth:
-                ch = text[j]
-                if ch == "(":
-                    depth += 1
-                elif ch == ")":
-                    depth -= 1
-                    if depth == 0:
-                        break
-                elif ch == "," and depth == 1:
-                    args.append((text[arg_start:j], col0 + arg_start))
-                    arg_start = j + 1
-                j += 1
-            if depth:
-                raise err(f"unclosed '(' after {symbol!r}", col0 + i)
-            args.append((text[arg_start:j], col0 + arg_start))
-            if len(args) == 1 and not args[0][0].strip():
-                args = []  # "A()" has no parameters
-            i = j + 1
-        if symbol.startswith("@"):
-            counts = AT_COMMANDS.get(symbol)
-            if counts is None:
-                known = ", ".join(sorted(AT_COMMANDS))
-                raise err(f"unknown command {symbol!r} (known: {known})", col0 + start)
-            if len(args) not in counts:
-                want = " or ".join(str(c) for c in counts)
-                raise err(f"{symbol} takes {want} argument(s), got {len(args)}", col0 + start)
-        out.append(_RawModule(symbol, col0 + start, args))
-    return out
-
-
-def _check_brackets(mods: list[_RawModule], err) -> None:
-    depth = 0
-    for m in mods:
-        if m.symbol == "[":
-            depth += 1
-        elif m.symbol == "]":
-            depth -= 1
-            if depth < 0:
-                raise err("']' without a matching '['", m.col)
-    if depth:
-        opening = [m for m in mods if m.symbol == "["]
-        raise err("'[' without a matching ']'", opening[-1].col)
 
 
 # ---------------------------------------------------------------------------
@@ -429,14 +336,14 @@ def _settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, flo
 
 def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],
            declared: tuple[str, ...], file: str
-           ) -> tuple[tuple[Module, ...], list[tuple[int, _RawModule]]]:
+           ) -> tuple[tuple[Module, ...], list[tuple[int, RawModule]]]:
     """The `axiom:` setting's modules, parameters evaluated, and as written
     (line, module)."""
     err = _err_at(file, lineno)
     raw = scan_modules(value, col, declared, err)
     if not raw:
         raise err("axiom is empty", col)
-    _check_brackets(raw, err)
+    check_brackets(raw, err)
     axiom = []
     for m in raw:
         params = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
@@ -475,12 +382,12 @@ class _ProductionLine:
     successor: tuple[SuccessorModule, ...]
     prob: float | None
     line: int
-    written: tuple[_RawModule, ...]  # the successor as written, with columns
+    written: tuple[RawModule, ...]  # the successor as written, with columns
 
 
 def _parse_productions(lines: list[tuple[int, str]], constants: dict[str, float],
                        declared: tuple[str, ...], file: str
-                       ) -> tuple[tuple[Production, ...], list[tuple[int, _RawModule]]]:
+                       ) -> tuple[tuple[Production, ...], list[tuple[int, RawModule]]]:
     """The productions of the production lines (line number, text), in file
     order; stochastic alternatives become one production, probabilities
     normalised to sum to 1. Also every successor module as written (line,
@@ -565,7 +472,7 @@ def _parse_production_line(lineno: int, line: str, constants: dict[str, float],
     mods = scan_modules(rhs, rhs_col, declared, err)
     if len(mods) == 1 and mods[0].symbol == "ε" and not mods[0].args:
         mods = []
-    _check_brackets(mods, err)
+    check_brackets(mods, err)
     successor = tuple(
         SuccessorModule(mod.symbol, tuple(
             compile_expr(t, names, constants, file=file, line=lineno, col=c)
@@ -607,7 +514,7 @@ def _predecessor(lhs: str, declared: tuple[str, ...],
 # warnings
 
 
-def _arity_warnings(written: list[tuple[int, _RawModule]], productions: tuple[Production, ...],
+def _arity_warnings(written: list[tuple[int, RawModule]], productions: tuple[Production, ...],
                     file: str) -> tuple[GrammarWarning, ...]:
     """A warning for every module (line, module as written) whose symbol has
     productions, or is matched as context, but none with its parameter count:
