@@ -182,11 +182,11 @@ def tree_field(trees: Sequence[TreeBake], i: int, key: str) -> np.ndarray:
 
 
 def tree_info(trees: Sequence[TreeBake], i: int) -> dict:
-    """Tree i's info with its name, in memory or stored (then only that
-    entry is read)."""
+    """Tree i's info with its name and segment paths, in memory or stored
+    (then only that entry is read)."""
     if isinstance(trees, StoredTrees):
         return trees.info(i)
-    return dict(trees[i].info, name=trees[i].name)
+    return dict(trees[i].info, name=trees[i].name, paths=list(trees[i].paths))
 
 
 def _read_tree(z, i: int, times: np.ndarray, path: Path) -> TreeBake:

@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .bake import Bake, TreeBake
-
-from .bake_file import load_bake
+from .bake_file import load_bake, tree_field, tree_info
 from .errors import InputError
 from .rotations import angle_between
 from .sway import segment_ends
@@ -87,8 +86,9 @@ class DiffReport:
 
 
 def load_any(path: str | Path) -> Bake:
-    """A bake (.npz) or an exported glTF (.glb/.gltf) read back as a bake;
-    a file listed in a manifest.json beside it is checked against its sha256."""
+    """A bake (.npz, read lazily: its trees as they are asked for) or an
+    exported glTF (.glb/.gltf) read back as a bake; a file listed in a
+    manifest.json beside it is checked against its sha256."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: file not found")
@@ -97,7 +97,7 @@ def load_any(path: str | Path) -> Bake:
 
         verify_against_manifest(p)
         return read_gltf_bake(p)
-    return load_bake(p)
+    return load_bake(p, lazy=True)  # the diff reads one tree at a time
 
 
 def verify_against_manifest(path: Path) -> None:
@@ -139,13 +139,16 @@ def reduction_allowance(*bakes: Bake) -> tuple[float, float, str]:
 
 
 def check_topology(a: Bake, b: Bake) -> None:
-    """Raise TopologyError saying what differs, if anything structural does."""
+    """Raise TopologyError saying what differs, if anything structural does
+    (reads each tree's info and parents only, not its motion)."""
     problems = []
     if len(a.times) != len(b.times):
         problems.append(f"frame counts differ: {len(a.times)} vs {len(b.times)}")
     elif not np.allclose(a.times, b.times, atol=1e-6):
         problems.append("frame times differ (another fps?)")
-    names_a, names_b = [t.name for t in a.trees], [t.name for t in b.trees]
+    info_a = [tree_info(a.trees, i) for i in range(len(a.trees))]
+    info_b = [tree_info(b.trees, i) for i in range(len(b.trees))]
+    names_a, names_b = [t["name"] for t in info_a], [t["name"] for t in info_b]
     if names_a != names_b:
         only_a = sorted(set(names_a) - set(names_b))
         only_b = sorted(set(names_b) - set(names_a))
@@ -153,13 +156,16 @@ def check_topology(a: Bake, b: Bake) -> None:
         what += [f"only in B: {', '.join(only_b)}"] if only_b else []
         problems.append("trees differ (" + ("; ".join(what) or "same names, other order") + ")")
     else:
-        for ta, tb in zip(a.trees, b.trees):
-            if ta.n_segments != tb.n_segments:
-                problems.append(f"tree {ta.name!r}: {ta.n_segments} vs {tb.n_segments} segments")
-            elif not np.array_equal(ta.seg_parent, tb.seg_parent):
-                s = int(np.nonzero(ta.seg_parent != tb.seg_parent)[0][0])
-                problems.append(f"tree {ta.name!r}: segment {s} ({ta.paths[s]}) hangs on "
-                                f"{ta.seg_parent[s]} in A, {tb.seg_parent[s]} in B")
+        for i, (ia, ib) in enumerate(zip(info_a, info_b)):
+            name, paths = ia["name"], ia["paths"]
+            if len(paths) != len(ib["paths"]):
+                problems.append(f"tree {name!r}: {len(paths)} vs {len(ib['paths'])} segments")
+                continue
+            pa, pb = tree_field(a.trees, i, "seg_parent"), tree_field(b.trees, i, "seg_parent")
+            if not np.array_equal(pa, pb):
+                s = int(np.nonzero(pa != pb)[0][0])
+                problems.append(f"tree {name!r}: segment {s} ({paths[s]}) hangs on "
+                                f"{pa[s]} in A, {pb[s]} in B")
     if problems:
         raise TopologyError("not the same trees: " + "; ".join(problems))
 
@@ -193,50 +199,88 @@ def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, n
 def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
                angle_tolerance: float = 0.1, worst: int = 5) -> DiffReport:
     """Compare two bakes of the same trees. Tolerances: metres and degrees,
-    to which the keyframe-reduction tolerances glTF inputs declare are added."""
+    to which the keyframe-reduction tolerances glTF inputs declare are added.
+    The trees are compared one at a time (a lazily read bake holds one in
+    memory): memory follows the largest tree and the `worst` segments'
+    curves, not the shot."""
     check_topology(a, b)
     allow_pos, allow_ang, note = reduction_allowance(a, b)
     user_pos, user_ang = position_tolerance, angle_tolerance
-    position_tolerance, angle_tolerance = user_pos + allow_pos, user_ang + allow_ang
-    frames = len(a.times)
-    pos_all, ang_all, pct_all, rows = [], [], [], []
-    scale = 1.0
+    tally = _Tally(len(a.times), user_pos + allow_pos, user_ang + allow_ang, worst)
     for ta, tb in zip(a.trees, b.trees):
-        pos, ang = _tree_errors(ta, tb, frames)
-        height = max(ta.height, 1e-9)
-        scale = max(scale, float(np.abs(ta.points).max()))
-        pos_all.append(pos)
-        ang_all.append(ang)
-        pct_all.append(100.0 * pos.max() / height)
-        for s in range(ta.n_segments):
-            rows.append((ta.name, s, ta.paths[s], pos[:, s], ang[:, s]))
-    pos = np.concatenate(pos_all, axis=1)
-    ang = np.concatenate(ang_all, axis=1)
-    over = (pos > position_tolerance) | (ang > angle_tolerance)
-    bad_frames = np.nonzero(over.any(axis=1))[0]
-    first = int(bad_frames[0]) if len(bad_frames) else None
-    score = np.maximum(pos.max(axis=0) / position_tolerance, ang.max(axis=0) / angle_tolerance)
-    order = np.argsort(-score, kind="stable")[:worst]
-    worst_rows, curves = [], {}
-    for i in order:
-        name, s, path, p, g = rows[i]
-        if p.max() == 0 and g.max() == 0:
-            continue
-        f = int(np.argmax(np.maximum(p / position_tolerance, g / angle_tolerance)))
-        worst_rows.append(SegmentError(name, s, path, float(p.max()), float(g.max()), f))
-        curves[f"{name} {path}"] = (p, g)
-    noise = bool(pos.max() <= NOISE_RELATIVE * scale + 1e-9 and ang.max() <= NOISE_ANGLE)
+        tally.add(ta, *_tree_errors(ta, tb, tally.frames))
+    first = tally.first_frame()
     return DiffReport(
-        frames=frames, segments=pos.shape[1], max_position=float(pos.max()),
-        max_position_percent=float(max(pct_all)) if pct_all else 0.0,
-        rms_position=float(np.sqrt(np.mean(pos**2))), max_angle=float(ang.max()),
-        rms_angle=float(np.sqrt(np.mean(ang**2))), first_frame=first,
-        first_time=float(a.times[first]) if first is not None else None, worst=worst_rows,
-        noise=noise, within=first is None, position_tolerance=user_pos,
-        angle_tolerance=user_ang, curves=curves, position_allowance=allow_pos,
-        angle_allowance=allow_ang, allowance_note=note,
+        frames=tally.frames, segments=tally.segments, max_position=tally.max_pos,
+        max_position_percent=tally.max_pct, rms_position=tally.rms(tally.sum_pos2),
+        max_angle=tally.max_ang, rms_angle=tally.rms(tally.sum_ang2), first_frame=first,
+        first_time=float(a.times[first]) if first is not None else None,
+        worst=tally.worst_rows(), noise=tally.noise(), within=first is None,
+        position_tolerance=user_pos, angle_tolerance=user_ang, curves=tally.curves(),
+        position_allowance=allow_pos, angle_allowance=allow_ang, allowance_note=note,
         version_differences=[] if first is None else version_differences(
             a.meta.get("versions"), b.meta.get("versions")))
+
+
+class _Tally:
+    """The diff's figures gathered tree by tree: maxima, sums of squares,
+    the frames past a tolerance, and the `worst` segments (by the larger of
+    position / tolerance and angle / tolerance; ties: the earlier segment)
+    with their error curves."""
+
+    def __init__(self, frames: int, position_tolerance: float, angle_tolerance: float,
+                 worst: int):
+        self.frames, self.tol_pos, self.tol_ang, self.keep = (frames, position_tolerance,
+                                                              angle_tolerance, worst)
+        self.segments = 0
+        self.max_pos = self.max_ang = self.max_pct = self.sum_pos2 = self.sum_ang2 = 0.0
+        self.scale = 1.0
+        self.over = np.zeros(frames, dtype=bool)
+        self.top: list[tuple[float, int, tuple]] = []  # (-score, segment number, row)
+
+    def add(self, tree: TreeBake, pos: np.ndarray, ang: np.ndarray) -> None:
+        """Tree `tree`'s position (F, S) m and angle (F, S) degree errors."""
+        if pos.size:
+            self.max_pos = max(self.max_pos, float(pos.max()))
+            self.max_ang = max(self.max_ang, float(ang.max()))
+            self.max_pct = max(self.max_pct, 100.0 * float(pos.max()) / max(tree.height, 1e-9))
+        self.scale = max(self.scale, float(np.abs(tree.points).max(initial=0.0)))
+        self.sum_pos2 += float(np.sum(pos**2))
+        self.sum_ang2 += float(np.sum(ang**2))
+        self.over |= ((pos > self.tol_pos) | (ang > self.tol_ang)).any(axis=1)
+        score = np.maximum(pos.max(axis=0, initial=0.0) / self.tol_pos,
+                           ang.max(axis=0, initial=0.0) / self.tol_ang)
+        for s in np.argsort(-score, kind="stable")[:self.keep]:
+            self.top.append((-float(score[s]), self.segments + int(s),
+                             (tree.name, int(s), tree.paths[s], pos[:, s].copy(),
+                              ang[:, s].copy())))
+        self.top = sorted(self.top, key=lambda e: e[:2])[:self.keep]
+        self.segments += pos.shape[1]
+
+    def rms(self, sum_squares: float) -> float:
+        return float(np.sqrt(sum_squares / max(self.frames * self.segments, 1)))
+
+    def first_frame(self) -> int | None:
+        bad = np.nonzero(self.over)[0]
+        return int(bad[0]) if len(bad) else None
+
+    def noise(self) -> bool:
+        """Only float32 round-off: every error within it."""
+        return bool(self.max_pos <= NOISE_RELATIVE * self.scale + 1e-9
+                    and self.max_ang <= NOISE_ANGLE)
+
+    def _moved(self):
+        return [row for _, _, row in self.top if row[3].max() > 0 or row[4].max() > 0]
+
+    def worst_rows(self) -> list[SegmentError]:
+        out = []
+        for name, s, path, p, g in self._moved():
+            f = int(np.argmax(np.maximum(p / self.tol_pos, g / self.tol_ang)))
+            out.append(SegmentError(name, s, path, float(p.max()), float(g.max()), f))
+        return out
+
+    def curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        return {f"{name} {path}": (p, g) for name, _, path, p, g in self._moved()}
 
 
 def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:

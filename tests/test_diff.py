@@ -337,3 +337,66 @@ def test_a_closed_pipe_is_not_a_traceback(sapling_export):
     proc.wait(timeout=60)
     assert "Traceback" not in err and "BrokenPipe" not in err, err
     assert proc.returncode == 141
+
+
+def _shot(bake, copies: int, push_every: int = 0):
+    """`bake`'s trees repeated `copies` times under new names; with
+    `push_every`, every so many trees' segment k moved by k x 0.1 mm in
+    frame k (distinct errors across trees)."""
+    trees = []
+    for c in range(copies):
+        for t in bake.trees:
+            u = copy.deepcopy(t)
+            u.name = f"{t.name}_{c}"
+            k = (c * 7) % u.n_segments
+            if push_every and c % push_every == 0 and not u.static:
+                u.positions[k % len(bake.times), k] += np.float32([1e-4 * (k + 1), 0.0, 0.0])
+            trees.append(u)
+    return type(bake)(bake.times, trees, dict(bake.meta, trees=len(trees)), bake.objects)
+
+
+def test_a_streamed_diff_equals_the_whole_shot_compared_at_once(bake, tmp_path):
+    """The diff reads one tree at a time; its figures are those of the whole
+    shot's error arrays computed at once here (max, RMS over every frame
+    and segment, the first frame past the tolerance, the worst segments in
+    order), on files read lazily as `treebake diff` reads them."""
+    from treebake.diff import _tree_errors, load_any
+
+    a, b = _shot(bake, 6), _shot(bake, 6, push_every=2)
+    save_bake(a, tmp_path / "a.npz")
+    save_bake(b, tmp_path / "b.npz")
+    r = diff_bakes(load_any(tmp_path / "a.npz"), load_any(tmp_path / "b.npz"),
+                   position_tolerance=2e-4, worst=4)
+    pos, ang = zip(*(_tree_errors(ta, tb, len(a.times)) for ta, tb in zip(a.trees, b.trees)))
+    pos, ang = np.concatenate(pos, axis=1), np.concatenate(ang, axis=1)
+    assert r.max_position == pytest.approx(pos.max(), rel=1e-12)
+    assert r.rms_position == pytest.approx(np.sqrt(np.mean(pos**2)), rel=1e-9)
+    assert r.max_angle == pytest.approx(ang.max(), rel=1e-12)
+    assert r.segments == pos.shape[1]
+    over = np.nonzero(((pos > 2e-4) | (ang > 0.1)).any(axis=1))[0]
+    assert r.first_frame == over[0]
+    score = np.maximum(pos.max(axis=0) / 2e-4, ang.max(axis=0) / 0.1)
+    names = [(t.name, s) for t in a.trees for s in range(t.n_segments)]
+    expect = [names[i] for i in np.argsort(-score, kind="stable")[:4] if score[i] > 0]
+    assert [(w.tree, w.segment) for w in r.worst] == expect and len(expect) == 4
+    assert set(r.curves) == {f"{w.tree} {w.path}" for w in r.worst}
+
+
+def test_diff_memory_follows_the_tree_not_the_shot(bake, tmp_path):
+    """Diffing two bakes of 4x the trees needs about the same memory as of
+    1x (tracemalloc's peak, numpy's arrays included), not 4x."""
+    import tracemalloc
+
+    from treebake.diff import load_any
+
+    peaks = []
+    for copies in (3, 12):
+        a, b = _shot(bake, copies), _shot(bake, copies, push_every=1)
+        save_bake(a, tmp_path / f"a{copies}.npz")
+        save_bake(b, tmp_path / f"b{copies}.npz")
+        del a, b
+        tracemalloc.start()
+        diff_bakes(load_any(tmp_path / f"a{copies}.npz"), load_any(tmp_path / f"b{copies}.npz"))
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    assert peaks[1] < 1.5 * peaks[0], peaks
