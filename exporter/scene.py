@@ -25,6 +25,7 @@ from .errors import InputError, SceneError
 from .keys import INTERPOLATIONS, Keyed
 from .names import MAX_TREE_NAME, is_valid, make_valid
 from .quality import QUALITIES, Quality
+from .scene_flows import DownwashSpec, GustSpec, read_downwash, read_gust
 from .scene_keys import (
     ATTRACTOR,
     BEAUFORT,
@@ -168,6 +169,8 @@ class Scene:
     wind: WindSpec | None = TOP["wind"].default
     explosions: list[ExplosionSpec] = field(default_factory=list)
     vortices: list[VortexSpec] = field(default_factory=list)
+    gusts: list[GustSpec] = field(default_factory=list)
+    downwashes: list[DownwashSpec] = field(default_factory=list)
     attractors: list[AttractorSpec] = field(default_factory=list)
     projectiles: list[ProjectileSpec] = field(default_factory=list)
     cuts: list[CutSpec] = field(default_factory=list)
@@ -438,6 +441,10 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         p = f"vortex[{i}]."
         scene.vortices.append(_vortex(r, v, p))
         _check_interval(r, scene.vortices[-1], p)
+    for i, g in enumerate(_array(r, raw, "gust")):
+        scene.gusts.append(read_gust(r, g, f"gust[{i}]."))
+    for i, d in enumerate(_array(r, raw, "downwash")):
+        scene.downwashes.append(read_downwash(r, d, f"downwash[{i}]."))
     for i, a in enumerate(_array(r, raw, "attractor")):
         p = f"attractor[{i}]."
         scene.attractors.append(AttractorSpec(**r.keys(a, ATTRACTOR, p)))

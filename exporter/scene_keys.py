@@ -44,7 +44,8 @@ TOP = table(
     Key("forest", "many trees scattered (below)", kind="table", doc_default="none"),
     *(Key(k, f"{what} (Forces and Events, below)", kind="table", doc_default="none")
       for k, what in (("wind", "mean wind with gusts"), ("explosion", "free-air blasts"),
-                      ("vortex", "tornadoes"), ("attractor", "acceleration fields"),
+                      ("vortex", "tornadoes"), ("gust", "moving pulses of air"),
+                      ("downwash", "rotors' downwash"), ("attractor", "acceleration fields"),
                       ("projectile", "thrown boxes and spheres"), ("cut", "felling"),
                       ("pull", "rope pulls"))),
     Key("camera", "the shot's camera (Camera, below)", kind="table", doc_default="none"),
@@ -123,6 +124,35 @@ VORTEX = table(
     Key("inflow", "radial inflow outside the core, × tangential speed", "", 0.5, 0.0, 2.0),
     Key("updraft", "updraft in the core, × `max_speed`", "", 0.5, 0.0, 2.0),
     Key("clockwise", "turning sense seen from above", kind="bool", default=False),
+)
+
+GUST = table(
+    Key("position", "the pulse's centre: a fixed point or a path (a creature, a vehicle)",
+        "m (x, y, z)", None, -1e6, 1e6, "vector", n=3, keyed=True),
+    Key("speed", "peak air speed, at the centre", "m/s", None, 0.0, 120.0, keyed=True),
+    Key("radius", "size of the pulse: `profile` falls off over it", "m", None, 0.1, 1000.0),
+    Key("profile", "how the speed falls with distance d from the centre: `bump` "
+        "(1 − (d/`radius`)²)³ inside `radius`, nothing beyond; `gaussian` exp(−(d/`radius`)²)",
+        kind="choice", default="bump", choices=("bump", "gaussian")),
+    Key("direction", "direction the air blows toward, counter-clockwise from +X", "degrees",
+        None, -360.0, 360.0, keyed=True,
+        doc_default="the path's direction of travel (needs a keyed `position`)"),
+    Key("time", "the gust rises from here over `ramp`", "s", 0.0, 0.0, 3600.0),
+    Key("ramp", "rise (and fall) time", "s", 0.5, 0.0, 600.0),
+    Key("end", "the gust dies down from here over `ramp`", "s", math.inf, 0.0,
+        doc_default=NEVER, doc_range="≥ `time`"),
+)
+
+DOWNWASH = table(
+    Key("position", "the rotor's hub, z its height above the ground", "m (x, y, z)", None,
+        -1e6, 1e6, "vector", n=3, keyed=True, doc_range="±1e6; z > 0"),
+    Key("thrust", "the rotor's thrust (its aircraft's weight in a hover: 9.81 N per kg)", "N",
+        None, 0.0, 1e7, keyed=True),
+    Key("radius", "rotor radius", "m", None, 0.2, 50.0),
+    Key("time", "the rotor's wash rises from here over `ramp`", "s", 0.0, 0.0, 3600.0),
+    Key("ramp", "rise (and fall) time", "s", 1.0, 0.0, 600.0),
+    Key("end", "the wash dies down from here over `ramp`", "s", math.inf, 0.0,
+        doc_default=NEVER, doc_range="≥ `time`"),
 )
 
 ATTRACTOR = table(
@@ -236,7 +266,8 @@ QUALITY = table(
 
 
 TABLES = {"scene": TOP, "scene.tree": TREE, "scene.forest": FOREST, "scene.wind": WIND,
-          "scene.explosion": EXPLOSION, "scene.vortex": VORTEX, "scene.attractor": ATTRACTOR,
+          "scene.explosion": EXPLOSION, "scene.vortex": VORTEX, "scene.gust": GUST,
+          "scene.downwash": DOWNWASH, "scene.attractor": ATTRACTOR,
           "scene.projectile": PROJECTILE, "scene.cut": CUT, "scene.pull": PULL,
           "scene.camera": CAMERA, "scene.camera.keys": CAMERA_KEY, "scene.quality": QUALITY}
 

@@ -1,4 +1,4 @@
-"""A scene's force fields combined into one evaluator on bone arrays, shared
+"""A scene's force fields (forces.py, flows.py) combined into one evaluator on bone arrays, shared
 by the planar LOD and the MuJoCo reference so both see identical loads.
 Keyed parameters (keys.Keyed) are taken at the time each engine asks
 (`forces`, `air_velocity`); where a bound over the shot is needed (which
@@ -11,13 +11,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..flows import Downwash, Gust
 from ..forces import Attractor, Explosion, Vortex, Wind, drag
 from ..keys import Keyed, always_zero, largest
 from ..scene import Scene
 
 # Below these, a field is taken not to move a tree (used to skip simulation).
 MIN_PRESSURE = 200.0  # Pa, explosion peak overpressure
-MIN_AIR_SPEED = 0.5  # m/s, vortex air speed
+MIN_AIR_SPEED = 0.5  # m/s, air speed of a vortex, a gust, a downwash
 # A blast's push is capped at MAX_ACCELERATION x each bone's mass and what
 # the cap holds back is delivered after at the same rate: the bone gets the
 # pulse's whole impulse, whatever an engine holds its loads for
@@ -71,6 +72,13 @@ class SceneLoads:
                                 np.array(v.velocity), v.max_speed, v.core_radius, v.time, v.end,
                                 v.inflow, v.updraft, v.clockwise, v.path)
                          for v in scene.vortices]
+        self.gusts = [Gust(g.position if isinstance(g.position, Keyed) else np.array(g.position),
+                           g.speed, g.radius, g.direction, g.profile, g.time, g.ramp, g.end)
+                      for g in scene.gusts]
+        self.downwashes = [Downwash(d.position if isinstance(d.position, Keyed)
+                                    else np.array(d.position), d.thrust, d.radius, d.time,
+                                    d.ramp, d.end)
+                           for d in scene.downwashes]
         self.attractors = [Attractor(a.position if isinstance(a.position, Keyed)
                                      else np.array(a.position), a.strength, a.radius, a.time,
                                      a.end)
@@ -80,8 +88,9 @@ class SceneLoads:
         """The unit horizontal direction the pymunk tier lays a tree's
         bending planes along, for a tree standing at `base` (m): the first
         of its felling cut's, a pull's, the wind's, a blast's (away from
-        it), a vortex's swirl, an attractor's, a projectile's flight; None
-        if none has one."""
+        it), a vortex's swirl, a gust's heading at its start, a downwash's
+        outwash (away from its hub at its start), an attractor's, a
+        projectile's flight; None if none has one."""
         if cut is not None:
             a = math.radians(cut.direction)
             return np.array([math.cos(a), math.sin(a), 0.0])
@@ -96,6 +105,12 @@ class SceneLoads:
         for v in self.vortices:
             if (d := _horizontal(base[:2] - v.centre(v.time))) is not None:
                 return np.array([-d[1], d[0], 0.0])  # the swirl is tangential
+        for g in self.gusts:
+            if (d := _horizontal(g.heading(g.time + g.ramp))) is not None:
+                return d
+        for w in self.downwashes:
+            if (d := _horizontal(base - w.hub(w.time))) is not None:
+                return d
         for a in self.attractors:
             if (d := _horizontal(a.position_at(a.time) - base)) is not None:
                 return d
@@ -105,11 +120,15 @@ class SceneLoads:
         return None
 
     def air_velocity(self, points: np.ndarray, t: float) -> np.ndarray:
+        """Air velocity (m/s) at `points` (N, 3) m at time t (s): the wind,
+        the vortices, the gusts and the downwash, summed."""
         air = np.zeros_like(points)
         if self.wind is not None:
             air += self.wind.velocity(points, t)
         for v in self.vortices:
             air += v.air_velocity(points, t)
+        for source in (*self.gusts, *self.downwashes):
+            air += source.air_velocity(points, t)
         return air
 
     def forces(self, t: float, com: np.ndarray, vel: np.ndarray, axis: np.ndarray,
@@ -216,6 +235,11 @@ class SceneLoads:
             reach = v.reach_speed() / MIN_AIR_SPEED
             t1 = min(v.end, self.scene.duration)
             if v.distance_at_closest(centre[None, :2], v.time, t1)[0] - radius < reach:
+                quiet = max(quiet, t1)
+        for source in (*self.gusts, *self.downwashes):
+            # both last until `end` + `ramp`; a keyed path counts where it comes closest
+            t1 = min(source.end + source.ramp, self.scene.duration)
+            if source.reaches(centre[:2], radius, MIN_AIR_SPEED, t1):
                 quiet = max(quiet, t1)
         for a in self.attractors:
             if not always_zero(a.strength):
