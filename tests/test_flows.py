@@ -309,3 +309,29 @@ def test_the_docs_examples_of_sources_are_valid_scenes(root):
     s = parse_scene(raw, file="docs/scenes.md")
     assert len(s.gusts) == 1 and len(s.downwashes) == 1
     assert isinstance(s.downwashes[0].position, Keyed)
+
+
+def flyover_bake(solver):
+    from treebake.library import preset_path
+    from treebake.scene import load_scene
+
+    return bake_scene(load_scene(preset_path("flyover")), solver=solver)
+
+
+def check_flyover(b):
+    """The rotor does work on every tree and the audit finds no energy made
+    up; the crowns under the wake are pressed down."""
+    audit = b.meta["energy"]
+    assert len(audit) == 12 and all(a["external_work_j"] > 0.3 for a in audit.values()), audit
+    worst = max(a["max_gain_fraction"] for a in audit.values())
+    assert worst <= GAIN_TOLERANCE, audit
+    assert max(np.ptp(tip(t)[:, 2]) for t in b.trees) > 0.1  # pressed down under the wake
+
+
+def test_the_flyover_preset_balances_its_energy_on_the_lod():
+    check_flyover(flyover_bake("planar"))
+
+
+@pytest.mark.slow  # 24 CPU s
+def test_the_flyover_preset_balances_its_energy_on_the_reference():
+    check_flyover(flyover_bake("full"))

@@ -36,6 +36,8 @@ MINIMAL = {
     "scene.wind": {"speed": 5.0},
     "scene.explosion": {"position": [0.0, 0.0, 1.0], "charge": 1.0},
     "scene.vortex": {"start": [0.0, 0.0], "max_speed": 10.0, "core_radius": 5.0},
+    "scene.gust": {"position": [0.0, 0.0, 1.0], "speed": 5.0, "radius": 2.0, "direction": 0.0},
+    "scene.downwash": {"position": [0.0, 0.0, 10.0], "thrust": 1000.0, "radius": 2.0},
     "scene.attractor": {"position": [0.0, 0.0, 1.0], "strength": 1.0},
     "scene.projectile": {"size": 0.3, "mass": 10.0, "position": [0.0, -5.0, 1.0]},
     "scene.cut": {},
