@@ -178,6 +178,33 @@ def test_a_gust_blows_along_its_travel_and_fades_where_it_stops():
     assert not gust.air_velocity(path.at(3.0)[None], 3.0).any()
 
 
+def test_a_gaussian_gust_and_its_reach():
+    """exp(-(d/radius)^2): speed / e at the radius; beyond its reach
+    radius sqrt(ln(U / 0.5 m/s)) it is slower than 0.5 m/s, inside faster."""
+    gust = Gust(np.array([0.0, 0.0, 2.0]), 20.0, 3.0, direction=180.0, profile="gaussian",
+                ramp=0.0)
+    at_radius = gust.air_velocity(np.array([[0.0, 3.0, 2.0]]), 1.0)[0]
+    assert at_radius == pytest.approx([-20.0 / math.e, 0.0, 0.0], abs=1e-12)
+    reach = gust.reach(0.5)
+    assert reach == pytest.approx(3.0 * math.sqrt(math.log(40.0)))
+    speeds = [np.linalg.norm(gust.air_velocity(np.array([[0.0, d, 2.0]]), 1.0))
+              for d in (0.99 * reach, 1.01 * reach)]
+    assert speeds[0] > 0.5 > speeds[1]
+
+
+def test_the_pymunk_tiers_planes_follow_a_source(root):
+    """A tree bends in the plane of the air that reaches it: a gust's
+    heading, away from a rotor's hub."""
+    sapling = str(root / "grammars" / "sapling.lsys")
+    base = np.array([4.0, 3.0, 0.0])
+    gust = SceneLoads(parse_scene({"tree": [{"grammar": sapling}], "gust": [
+        {"position": [0.0, 0.0, 1.0], "speed": 5.0, "radius": 9.0, "direction": 90.0}]}))
+    assert gust.dominant_direction(base) == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+    rotor = SceneLoads(parse_scene({"tree": [{"grammar": sapling}], "downwash": [
+        {"position": [0.0, 0.0, 10.0], "thrust": 5000.0, "radius": 2.0}]}))
+    assert rotor.dominant_direction(base) == pytest.approx([0.8, 0.6, 0.0])
+
+
 def two_saplings(root, **forces):
     sapling = str(root / "grammars" / "sapling.lsys")
     return parse_scene({"duration": 1.0, "quality": "draft", "tree": [
