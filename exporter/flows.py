@@ -147,7 +147,10 @@ class Downwash:
     be keyed): the wake below it and the radial outwash over the ground,
     active from `time` to `end` (s) with smoothstep ramps of `ramp` s. The
     field is the hover's, carried with the rotor (no skew of the wake in
-    forward flight)."""
+    forward flight). The wake turns into the outwash at height `floor` (m):
+    0 over open ground; over a dense forest, about its canopy's top, which
+    the wake cannot pass through: the outwash then blows across the crowns
+    and the air below the floor is left still (a sheltered understorey)."""
 
     position: np.ndarray | Keyed
     thrust: float | Keyed
@@ -155,6 +158,7 @@ class Downwash:
     time: float = 0.0
     ramp: float = 1.0
     end: float = math.inf
+    floor: float = 0.0
 
     def hub(self, t: float) -> np.ndarray:
         """The rotor's hub (x, y, z) m at time t (s)."""
@@ -178,12 +182,12 @@ class Downwash:
         big_r = self.radius
         d = points[:, :2] - hub[:2]
         x2 = (d * d).sum(1) / big_r**2  # (r / R)^2
-        z = np.maximum(points[:, 2], 0.0)
+        z = np.maximum(points[:, 2] - self.floor, 0.0)  # height above the floor, m
         # the wake: v_i at the disk, 2 v_i far below it, on the axis of a
         # uniformly loaded disk (the vortex cylinder); across the wake it falls
-        # off smoothly past the contracted wake's R / sqrt(2); near the ground
+        # off smoothly past the contracted wake's R / sqrt(2); near the floor
         # it slows to nothing within about R / 2 as the flow turns outward
-        depth = (hub[2] - z) / big_r
+        depth = (hub[2] - self.floor - z) / big_r
         along = v_i * (1.0 + depth / np.sqrt(1.0 + depth * depth))
         across = np.exp(-x2 * x2)
         turning = -np.expm1(-(2.0 * z / big_r) ** 2)

@@ -32,6 +32,7 @@ class DownwashSpec:
     time: float = DOWNWASH["time"].default  # s
     ramp: float = DOWNWASH["ramp"].default  # s
     end: float = DOWNWASH["end"].default  # s
+    floor: float = DOWNWASH["floor"].default  # m, where the wake turns outward
 
 
 def read_gust(r, data: dict, p: str) -> GustSpec:
@@ -47,15 +48,15 @@ def read_gust(r, data: dict, p: str) -> GustSpec:
 
 def read_downwash(r, data: dict, p: str) -> DownwashSpec:
     """A `[[downwash]]` table read by the scene's reader `r`: the hub stays
-    above the ground at every key."""
+    above the floor at every key."""
     spec = DownwashSpec(**r.keys(data, DOWNWASH, p))
     keyed = isinstance(spec.position, Keyed)
     points = spec.position.values if keyed else (spec.position,)
     for i, point in enumerate(points):
-        if point[2] <= 0.0:
+        if point[2] <= spec.floor:
             key = f"{p}position[{i}].value" if keyed else f"{p}position"
-            raise r.fail(key, f"z = {point[2]:g} m: the rotor's hub must be above the ground "
-                         "(z > 0 m)")
+            raise r.fail(key, f"z = {point[2]:g} m: the rotor's hub must be above the floor "
+                         f"(z > floor = {spec.floor:g} m)")
     _check_interval(r, spec, p)
     return spec
 

@@ -145,7 +145,7 @@ GUST = table(
 
 DOWNWASH = table(
     Key("position", "the rotor's hub, z its height above the ground", "m (x, y, z)", None,
-        -1e6, 1e6, "vector", n=3, keyed=True, doc_range="±1e6; z > 0"),
+        -1e6, 1e6, "vector", n=3, keyed=True, doc_range="±1e6; z > `floor`"),
     Key("thrust", "the rotor's thrust (its aircraft's weight in a hover: 9.81 N per kg)", "N",
         None, 0.0, 1e7, keyed=True),
     Key("radius", "rotor radius", "m", None, 0.2, 50.0),
@@ -153,6 +153,9 @@ DOWNWASH = table(
     Key("ramp", "rise (and fall) time", "s", 1.0, 0.0, 600.0),
     Key("end", "the wash dies down from here over `ramp`", "s", math.inf, 0.0,
         doc_default=NEVER, doc_range="≥ `time`"),
+    Key("floor", "height where the wake turns into the outwash: 0 over open ground, the "
+        "canopy's top over a dense forest (the air below it is left still)", "m", 0.0, 0.0,
+        200.0),
 )
 
 ATTRACTOR = table(

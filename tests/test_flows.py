@@ -165,6 +165,26 @@ def test_the_outwash_falls_as_r_over_big_r_and_the_air_is_smooth():
     assert 0 < edge[0, 1] < 1e-8 and not edge[1].any()
 
 
+def test_over_a_floor_the_wash_is_the_open_grounds_raised_and_still_below():
+    """`floor` (a dense canopy's top) is where the wake turns outward: the
+    field over it is the open ground's field of the same rotor as high above
+    the ground as it is above the floor, raised by the floor's height; below
+    the floor the air is still."""
+    floor = 14.0
+    over = Downwash(np.array([2.0, -1.0, 24.0]), 98_000.0, 8.2, ramp=0.0, floor=floor)
+    ground = Downwash(np.array([2.0, -1.0, 24.0 - floor]), 98_000.0, 8.2, ramp=0.0)
+    rng = np.random.default_rng(1)
+    pts = np.c_[rng.uniform(-40, 40, (500, 2)), rng.uniform(0, 30, 500)]
+    above = pts[:, 2] >= floor
+    assert np.array_equal(over.air_velocity(pts[above], 1.0),
+                          ground.air_velocity(pts[above] - [0.0, 0.0, floor], 1.0))
+    assert not over.air_velocity(pts[~above], 1.0).any()
+    # the crowns beside the hover, 10 m out, 2 m over the floor: an outwash
+    # across them of about 2 v_i R / r (momentum theory), not still air
+    u = over.air_velocity(np.array([[12.0, -1.0, floor + 2.0]]), 1.0)[0]
+    assert u[0] > 0.5 * 2 * over.induced(98_000.0) * 8.2 / 10.0
+
+
 def test_a_gust_blows_along_its_travel_and_fades_where_it_stops():
     path = Keyed((0.0, 2.0, 4.0), ((0.0, 0.0, 1.0), (0.0, 10.0, 1.0), (0.0, 10.0, 1.0)),
                  "smooth")
@@ -304,7 +324,7 @@ CASES = {
                            "downwash[0].thrust = -5 is out of range [0, 1e+07] N"),
     "rotor underground": (ROTOR_OK.replace("[20.0, 0.0, 5.0]", "[20.0, 0.0, 0.0]"),
                           "downwash[0].position[1].value: z = 0 m: the rotor's hub must be "
-                          "above the ground"),
+                          "above the floor (z > floor = 0 m)"),
     "rotor without radius": (ROTOR_OK.replace("radius = 4.0\n", ""),
                              "downwash[0].radius: is required"),
     "rotor interpolation of a value": (ROTOR_OK + "thrust_interpolation = \"smooth\"\n",

@@ -77,7 +77,7 @@ class SceneLoads:
                       for g in scene.gusts]
         self.downwashes = [Downwash(d.position if isinstance(d.position, Keyed)
                                     else np.array(d.position), d.thrust, d.radius, d.time,
-                                    d.ramp, d.end)
+                                    d.ramp, d.end, d.floor)
                            for d in scene.downwashes]
         self.attractors = [Attractor(a.position if isinstance(a.position, Keyed)
                                      else np.array(a.position), a.strength, a.radius, a.time,
