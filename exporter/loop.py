@@ -132,9 +132,14 @@ class Seam:
         return Seam(*(max(a, b) for a, b in zip(self.record().values(), other.record().values())))
 
     def record(self) -> dict:
-        return {"position": round(self.position, 4), "rotation": round(self.rotation, 4),
-                "rate": round(self.rate, 4), "position_m": round(self.position_m, 7),
-                "rate_jump": round(self.rate_jump, 6)}
+        return {"position": _figure(self.position), "rotation": _figure(self.rotation),
+                "rate": _figure(self.rate), "position_m": _figure(self.position_m),
+                "rate_jump": _figure(self.rate_jump)}
+
+
+def _figure(x: float) -> float:
+    """Three significant digits: enough to read, the same on every machine."""
+    return float(f"{x:.3g}")
 
 
 def _ratio(jump: np.ndarray, largest: np.ndarray, floor: float) -> tuple[float, int]:
@@ -238,7 +243,8 @@ class LoopPlan:
         trees (which tree is worst, and whether it passes)."""
         worst, tree = Seam(), None
         for name, s in self.seams.items():
-            if tree is None or max(s.position, s.rate) > max(worst.position, worst.rate):
+            if tree is None or max(s.position, s.rotation, s.rate) > max(
+                    worst.position, worst.rotation, worst.rate):
                 tree = name
             worst = worst.worst(s)
         return {"period_s": self.period, "frames": self.frames + 1,
