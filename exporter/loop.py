@@ -251,6 +251,15 @@ class LoopPlan:
                 "run_in_s": round(self.run_in, 6), "run_in_loops": self.loops,
                 "seam": dict(worst.record(), worst_tree=tree, passes=worst.passes)}
 
+    def line(self) -> str:
+        """The loop in one line for people: period, run-in, the seam."""
+        m = self.meta()
+        seam = m["seam"]
+        return (f"loop: {self.period:g} s ({m['frames']} frames, the last the first again), "
+                f"run-in {self.run_in:g} s ({self.loops} loops); seam {seam['position']:.2g} "
+                f"(position), {seam['rotation']:.2g} (rotation), {seam['rate']:.2g} (rotation "
+                "rate) x the largest frame-to-frame step")
+
     def notes(self) -> list[str]:
         """What people should hear: a seam that does not pass."""
         m = self.meta()["seam"]

@@ -85,7 +85,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
         if looping is not None:
             meta["loop"] = looping.meta()
             meta["notes"] = meta.get("notes", []) + looping.notes()
-            for line in looping.notes() if log else ():
+            for line in [looping.line(), *looping.notes()] if log else ():
                 log(line)
         store.finish(meta, objects)
     if path is None:

@@ -5,6 +5,7 @@ cyclic shift of its frames, the seam's measure against an analytic motion,
 and the loop's keys validated (exit 2 naming the key)."""
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ turbulence = 0.3
 
 
 def short_loop(phase: str = ""):
-    return bake_scene(parse_scene(__import__("tomllib").loads(SHORT.format(phase=phase))))
+    return bake_scene(parse_scene(tomllib.loads(SHORT.format(phase=phase))))
 
 
 @pytest.fixture(scope="module")
@@ -169,8 +170,6 @@ grammars = ["sapling"]
 count = 6
 area = [40.0, 40.0]
 """
-    import tomllib
-
     def trees(seed, looped):
         return parse_scene(tomllib.loads(body.format(seed=seed, loop="loop = true" * looped)))
 
@@ -196,7 +195,8 @@ BAD = {
                   "duration = 0.1 s is 2 frame intervals"),
     "an explosion": ("loop = true\n" + TREE + "[[explosion]]\nposition = [0.0, 5.0, 1.0]\n"
                      "charge = 1.0\n", "explosion: cannot repeat"),
-    "a pull": ("loop = true\n" + TREE + "[[pull]]\ntree = 0\nforce = [100.0, 0.0, 0.0]\nrelease = 1.0\n",
+    "a pull": ("loop = true\n" + TREE + "[[pull]]\ntree = 0\nforce = [100.0, 0.0, 0.0]\n"
+               "release = 1.0\n",
                "pull: cannot repeat"),
     "keyed wind": ("duration = 3.0\nloop = true\n" + TREE + "[wind]\nspeed = [{time = 0, "
                    "value = 1}, {time = 3, value = 1}]\n",
