@@ -114,15 +114,16 @@ def validate(scene, raw: dict, fail: Callable[[str, str], Exception], tables: di
 
 @dataclass
 class Seam:
-    """How close a loop's seam is, worst over segments: the step across
-    the seam over the largest step elsewhere, for positions, rotations and
-    rotation rates (<= 1: no larger than any frame-to-frame step)."""
+    """How close a loop's seam is, worst over segments (`seam` below): the
+    jump at the seam over the largest frame-to-frame step (change) within
+    the loop, for positions, rotations and rotation rates (<= 1: the seam
+    is no larger than a step the motion takes anyway)."""
 
     position: float = 0.0
     rotation: float = 0.0
     rate: float = 0.0
-    position_m: float = 0.0  # the worst segment's seam step, m
-    rate_jump: float = 0.0  # the worst segment's change of angular velocity at the seam, rad/s
+    position_m: float = 0.0  # m, the worst segment's distance from its start a loop later
+    rate_jump: float = 0.0  # rad/s, the worst segment's change of angular velocity there
 
     @property
     def passes(self) -> bool:
