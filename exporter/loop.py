@@ -22,7 +22,8 @@ How the motion is made periodic:
   chosen before the simulation from the trees' damping: the slowest
   structural decay time tau = 2 / alpha_min (s; rig.py's mass-
   proportional damping alpha = 2 zeta omega_limb), K T >= ramp +
-  tau ln(1 / RESIDUAL), at least one loop, at most MAX_RUN_IN s.
+  tau ln(1 / RESIDUAL), at least one loop, at most MAX_RUN_IN s (or
+  the ramp, if longer: the loop never sees it).
   Deterministic; air drag only damps the transient further.
 - Phase: a tree's `phase` p (s; a forest's trees draw one from the scene's
   seed) shifts its loop cyclically by k = round(p fps) frames: frame f of
@@ -286,5 +287,6 @@ def plan(scene, rigs, ramp: float) -> LoopPlan | None:
     if t is None:
         return None
     need = ramp + decay_time(rigs) * math.log(1.0 / RESIDUAL)
-    loops = max(1, min(math.ceil(need / t - 1e-9), math.ceil(MAX_RUN_IN / t)))
+    loops = min(math.ceil(need / t - 1e-9), math.ceil(MAX_RUN_IN / t))
+    loops = max(1, loops, math.ceil(ramp / t - 1e-9))  # the wind's ramp never reaches the loop
     return LoopPlan(t, scene.frame_count - 1, loops, scene.fps)

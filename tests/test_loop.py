@@ -160,6 +160,21 @@ def test_the_seam_measure_against_an_analytic_motion():
     assert s.rotation < 1e-6 and s.rate > 1.5 and not s.passes
 
 
+def test_the_run_in_covers_the_ramp_and_the_slowest_decay():
+    """K whole loops, the fewest with K T >= ramp + tau ln 100 (tau = 2 /
+    alpha_min, s), capped at 120 s unless the ramp is longer."""
+    from types import SimpleNamespace
+
+    rigs = [SimpleNamespace(alpha=np.array([0.5, 2.0])), SimpleNamespace(alpha=np.array([1.0]))]
+    scene = SimpleNamespace(loop=True, fps=24.0, frame_count=73)  # T = 3 s
+    need = 2.0 + 4.0 * math.log(100.0)  # 20.4 s
+    assert loop.plan(scene, rigs, 2.0).loops == math.ceil(need / 3.0) == 7
+    slow = [SimpleNamespace(alpha=np.array([0.01]))]  # tau = 200 s
+    assert loop.plan(scene, slow, 2.0).loops == 40  # the cap, 120 s
+    assert loop.plan(scene, slow, 200.0).loops == 67  # but never inside the ramp
+    assert loop.plan(SimpleNamespace(loop=False), rigs, 2.0) is None
+
+
 def test_a_forest_draws_phases_from_the_seed_and_no_loop_keeps_none():
     body = """
 duration = 4.0
