@@ -213,6 +213,10 @@ BAD = {
     "a pull": ("loop = true\n" + TREE + "[[pull]]\ntree = 0\nforce = [100.0, 0.0, 0.0]\n"
                "release = 1.0\n",
                "pull: cannot repeat"),
+    "a gust": ("loop = true\n" + TREE + "[[gust]]\nposition = [0.0, 0.0, 3.0]\nspeed = 8.0\n"
+               "direction = 0.0\nradius = 4.0\n", "gust: cannot repeat"),
+    "a downwash": ("loop = true\n" + TREE + "[[downwash]]\nposition = [0.0, 0.0, 20.0]\n"
+                   "thrust = 50000.0\nradius = 6.0\n", "downwash: cannot repeat"),
     "keyed wind": ("duration = 3.0\nloop = true\n" + TREE + "[wind]\nspeed = [{time = 0, "
                    "value = 1}, {time = 3, value = 1}]\n",
                    "wind.speed: takes one value in a loop scene"),
