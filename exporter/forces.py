@@ -155,9 +155,11 @@ class Wind:
         return np.stack([np.cos(a), np.sin(a)], axis=1)
 
     def prepare(self, rng: np.random.Generator, duration: float, extent: np.ndarray,
-                dt: float = 0.05) -> None:
+                dt: float = 0.05, period: float | None = None) -> None:
         """Synthesise the turbulence for a scene lasting `duration` s over the
-        horizontal box `extent` = ((xmin, ymin), (xmax, ymax)) m."""
+        horizontal box `extent` = ((xmin, ymin), (xmax, ymax)) m; with a
+        `period` (s, a loop: loop.py) the field read at t and t + period is
+        the same (the series' length is the period, its spacing about `dt`)."""
         if self.top_turbulence <= 0 or self.top_speed <= 0:
             return
         lo, hi = np.asarray(extent, dtype=float)
@@ -173,8 +175,12 @@ class Wind:
             across = (corners - middle) @ np.stack([-heads[:, 1], heads[:, 0]], axis=1).T
         self._along0 = float(along.min())
         travel = (along.max() - along.min()) / self.top_speed
-        count = math.ceil((duration + travel + 10.0) / dt)
-        count += count % 2
+        if period is None:
+            count = math.ceil((duration + travel + 10.0) / dt)
+            count += count % 2
+        else:  # the inverse FFT's series repeats over count * dt: make that the period
+            count = 2 * max(1, round(period / (2 * dt)))
+            dt = period / count
         lateral = self.length_scale / 3
         self._cross0 = float(across.min())
         self._lane = lateral

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import loop
 from .bake import Bake, TreeBake, bake_meta, moved_tree_bake, objects_bake, static_tree_bake
 from .bake_file import BakeWriter, load_bake
 from .grow import grow
@@ -47,9 +48,12 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     budget = budget or Budget()
     grown = grow(scene, budget)
     rigged = rig_scene(scene, grown, quality, log)
+    looping = loop.plan(scene, [t.rig for t in rigged.trees if t.active],
+                        scene.wind.ramp if scene.wind else 0.0)
+    run = scene if looping is None else looping.sim_scene(scene)  # with the loop's run-in
     animated = sum(t.rig.model.n_segments for t in rigged.trees if t.active)
     need = estimate(animated, sum(t.rig.model.n_segments for t in rigged.trees if not t.active),
-                    scene.frame_count, workers,
+                    run.frame_count, workers,
                     None if path is None else segments_held(kind, scene, workers))
     if log:
         log(need.line())
@@ -67,14 +71,22 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
                                                                           "not simulated")))
 
         def take(i: int, motion, engines: str) -> None:
-            store.add(i, moved_tree_bake(grown[i], rigged.trees[i].rig, motion, engines))
+            tree = moved_tree_bake(grown[i], rigged.trees[i].rig, motion, engines)
+            if looping is not None:  # the loop's frames, after the run-in
+                tree = looping.window(tree, scene.trees[i].phase)
+            store.add(i, tree)
 
         result = SolveResult({})
         if any(t.active for t in rigged.trees):
-            result = simulate(kind, rigged, scene, workers, timestep, log, progress, scheduler,
+            result = simulate(kind, rigged, run, workers, timestep, log, progress, scheduler,
                               on_tree=take)
             timing.update(result.timing)
         meta, objects = bake_meta(scene, kind, rigged, result), objects_bake(result.objects)
+        if looping is not None:
+            meta["loop"] = looping.meta()
+            meta["notes"] = meta.get("notes", []) + looping.notes()
+            for line in [looping.line(), *looping.notes()] if log else ():
+                log(line)
         store.finish(meta, objects)
     if path is None:
         bake = Bake(times, store.trees, meta, objects, order=store.order)

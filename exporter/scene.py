@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import library
+from . import library, loop
 from .errors import InputError, SceneError
 from .keys import INTERPOLATIONS, Keyed
 from .names import MAX_TREE_NAME, is_valid, make_valid
@@ -60,6 +60,7 @@ class TreeSpec:
     seed: int | None = TREE["seed"].default
     iterations: int | None = TREE["iterations"].default
     quality: str | None = TREE["quality"].default  # per-tree override (e.g. far trees)
+    phase: float | None = None  # s, a loop's offset (None: a forest's tree, drawn by loop.py)
 
 
 # A keyed key's field holds a plain value, or a keys.Keyed curve through its keys.
@@ -178,6 +179,7 @@ class Scene:
     camera: CameraSpec | None = TOP["camera"].default
     formats: tuple[str, ...] = TOP["formats"].default  # `treebake bake` exports (--format wins)
     frame_start: int = TOP["frame_start"].default  # number of frame 0 in every exported format
+    loop: bool = TOP["loop"].default  # a seamless loop of `duration` (loop.py)
 
     @property
     def frame_count(self) -> int:
@@ -411,7 +413,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
         file=file,
         source_hash=source_hash,
         **{k: r.key(raw, TOP[k], "") for k in ("duration", "fps", "frame_start", "seed",
-                                                "gravity", "prestress", "ground")},
+                                                "gravity", "prestress", "ground", "loop")},
     )
     r.horizon = scene.duration if horizon is None else max(scene.duration, horizon)
     scene.quality = _quality(r, raw.get("quality", TOP["quality"].default))
@@ -466,6 +468,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
             ramp=r.key(c, PULL["ramp"], p, min(1.0, release), hi=release))))
     if "camera" in raw:
         scene.camera = _camera(r, r.table(raw["camera"], "camera"))
+    loop.validate(scene, raw, r.fail, TOP)
     return scene
 
 

@@ -25,7 +25,9 @@ NEVER = "never"
 TOP = table(
     Key("name", "job name: output goes to `out/<name>/`", kind="string",
         doc_default="file name"),
-    Key("duration", "simulated time", "s", 10.0, 0.0, 3600.0),
+    Key("duration", "simulated time (with `loop`: the loop's length)", "s", 10.0, 0.0, 3600.0),
+    Key("loop", "bake a seamless loop of `duration` (docs/scenes.md, \"Loops\")", kind="bool",
+        default=False),
     Key("fps", "frames per second of the bake", "1/s", 24.0, 1.0, 1000.0),
     Key("frame_start", "number of the first frame in every exported format (glTF key "
         "times, USD time codes, OBJ file numbers; docs/formats.md)", "", 1, 0, 1_000_000,
@@ -67,6 +69,8 @@ TREE = table(
         "integer", doc_default="grammar's"),
     Key("quality", "this tree's quality level", kind="choice", choices=LEVELS,
         doc_default="scene's"),
+    Key("phase", "with `loop`: how far ahead in its loop this tree is", "s", 0.0, 0.0, 3600.0,
+        doc_range="0 – < `duration`"),
 )
 
 FOREST = table(

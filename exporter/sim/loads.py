@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import loop
 from ..flows import Downwash, Gust
 from ..forces import Attractor, Explosion, Vortex, Wind, drag
 from ..keys import Keyed, always_zero, largest
@@ -65,7 +66,7 @@ class SceneLoads:
                              w.length_scale, w.start, w.ramp, w.end)
             if extent is None:
                 extent = np.array([[-10.0, -10.0], [10.0, 10.0]])
-            self.wind.prepare(rng, scene.duration, extent)
+            self.wind.prepare(rng, scene.duration, extent, period=loop.period(scene))
         self.explosions = [Explosion(np.array(e.position), e.time, e.charge)
                            for e in scene.explosions]
         self.vortices = [Vortex(np.array(v.start if v.path is None else v.path.values[0]),
