@@ -233,3 +233,36 @@ def test_the_render_scripts_alembic_colours_are_the_exporters():
     want = {"bark": BARK_COLOUR, "object": OBJECT_COLOUR,
             **{("leaf" if k == 1 else f"leaf{k}"): v for k, v in LEAF_COLOURS.items()}}
     assert colours == want
+
+
+def test_blender_plays_a_loop_back_to_back_without_a_seam(tmp_path):
+    """Issue 41's loop in Blender: a short loop's glb and USD imported,
+    the last frame (N + 1) is the first frame's pose in both, and the step
+    a player shows across the seam (frame N to N + 1, then on to 2) is no
+    larger than the largest step between other frames Blender shows."""
+    import tomllib
+
+    import blender
+    from treebake.pipeline import bake_scene
+    from treebake.scene import parse_scene
+
+    need("pxr")
+    scene = parse_scene(tomllib.loads(
+        'duration = 2.0\nfps = 24\nloop = true\n[[tree]]\ngrammar = "sapling"\n'
+        '[wind]\nspeed = 8.0\nturbulence = 0.3\n'))
+    bake = bake_scene(scene)
+    n = len(bake.times)  # N + 1 frames: the last is the first again
+    export_bake(bake, tmp_path, "loop", ExportOptions(formats=("glb", "usd")))
+    numbers = list(range(1, n + 1))
+    got = blender.frames(tmp_path / "loop" / "loop.glb", tmp_path / "loop" / "loop.usd",
+                         tmp_path / "blender.json", numbers)
+    tree = bake.trees[0]
+    names = joint_names(tree.name, tree.paths)
+    for fmt in ("glb", "usd"):
+        assert got[fmt]["actions"] == [[1.0, float(n)]]
+        heads = np.array([[got[fmt]["heads"][str(k)][name] for name in names] for k in numbers])
+        assert np.abs(heads[-1] - heads[0]).max() < 1e-6, fmt  # frame N + 1 is frame 1
+        steps = np.linalg.norm(np.diff(heads, axis=0), axis=-1).max(axis=1)  # (N,) m
+        # the seam a player shows: N -> N + 1 (= 1), and N + 1 -> 2 is 1 -> 2
+        assert steps[-1] <= steps[:-1].max(), (fmt, steps[-1], steps[:-1].max())
+        assert steps.max() > 1e-3, fmt  # the sapling moves: a jump would show
