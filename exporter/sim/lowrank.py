@@ -101,10 +101,6 @@ class LowRankFactor:
         r = matrix.u.shape[1]
         self.drop = ~np.asarray(matrix.keep, dtype=bool)
         w, diag = self._factor(matrix)
-        if n and not np.all(diag > 0):
-            bad = int(np.argmin(diag))
-            raise np.linalg.LinAlgError(f"matrix not positive definite (pivot {bad}: "
-                                        f"{diag[bad]:.3g})")
         # scratch slot n: zero generators, so padding adds nothing
         self.u = np.concatenate([matrix.u.astype(float), np.zeros((1, r))])
         self.w_over_d = np.concatenate([w / diag[:, None], np.zeros((1, r))])
@@ -123,14 +119,18 @@ class LowRankFactor:
             slot[order[bounds[d]:bounds[d + 1]]] = np.arange(bounds[d + 1] - bounds[d])
         w = np.empty((n, r))
         diag = np.empty(n)
-        q = np.zeros((0, r, r))
-        for d in range(len(bounds) - 2, -1, -1):
+        deepest = len(bounds) - 2
+        qk = np.zeros((bounds[deepest + 1] - bounds[deepest], r, r))  # the leaves': nothing below
+        for d in range(deepest, -1, -1):
             k = order[bounds[d]:bounds[d + 1]]
-            qk = q if len(q) == len(k) else np.zeros((len(k), r, r))
             u = m.u[k]
             qu = np.matmul(qk, u[:, :, None])[:, :, 0]
             wk = m.v[k] - qu
             dk = m.diagonal[k] - (u * qu).sum(1)
+            if not np.all(dk > 0):
+                bad = int(k[np.argmin(dk)])
+                raise np.linalg.LinAlgError(f"matrix not positive definite (pivot {bad}: "
+                                            f"{dk.min():.3g})")
             w[k], diag[k] = wk, dk
             if d == 0:
                 break
@@ -140,8 +140,8 @@ class LowRankFactor:
             if cut.any():
                 pass_up[np.ix_(cut, self.drop, np.ones(r, dtype=bool))] = 0.0
                 pass_up[np.ix_(cut, np.ones(r, dtype=bool), self.drop)] = 0.0
-            q = np.zeros((bounds[d] - bounds[d - 1], r, r))
-            np.add.at(q, slot[m.parent[k]], pass_up)
+            qk = np.zeros((bounds[d] - bounds[d - 1], r, r))  # the next depth's
+            np.add.at(qk, slot[m.parent[k]], pass_up)
         return w, diag
 
     def _levels(self, m: TreeMatrix) -> list[Level]:
