@@ -28,7 +28,8 @@ Implicit steps need the tangent of the right-hand side: K_s plus K_g,
 gravity's geometric stiffness (a hanging twig's pendulum
 stiffness, a stem's P-delta softening). M, C and K_g have entries only
 between a dof and its ancestors, so A = M + c1 C + c2 (K_s + K_g) factors
-without fill-in (treefactor.py); the products the steps need (J^T F, C v,
+without fill-in (treefactor.py, entry by entry; for trees deeper than
+EXPLICIT_DEPTH, lowrank.py, in low-rank form, linear in the dofs); the products the steps need (J^T F, C v,
 poses) are sums along the tree (treesums.py), never matrices.
 """
 
@@ -41,9 +42,12 @@ import numpy as np
 from ..rotations import cross, cross_rows, rotation_rows, turn_rows
 from .common import Bones
 from .layout import ChainLayout
+from .lowrank import LowRankFactor, TreeMatrix
 from .rules import limb_damping
 from .treefactor import TreeFactor, ancestor_table, depths
 from .treesums import ChainSums
+
+EXPLICIT_DEPTH = 256  # dofs: deeper trees take the low-rank factor (docs/physics.md)
 
 
 @dataclass
@@ -59,6 +63,48 @@ class Pose:
     axis: np.ndarray
     first: np.ndarray
     second: np.ndarray
+
+
+@dataclass
+class Entries:
+    """The matrices' entries between dof i and its descendant (or itself) j,
+    from the subtree moments of j's bone: hinge pivots p and axes n (2B, 3),
+    the subtree's mass s0 (2B,) kg, first and second moments s1 (2B, 3), s2
+    (2B, 3, 3) and summed inertia si (2B, 3, 3), positions from any origin,
+    `lever` sum m (c - p_j) (2B, 3) kg m, gravity (3,) m/s^2."""
+
+    p: np.ndarray
+    axis: np.ndarray
+    s0: np.ndarray
+    s1: np.ndarray
+    s2: np.ndarray
+    si: np.ndarray
+    lever: np.ndarray
+    gravity: np.ndarray
+
+    def mass(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """M_ij = sum over the bodies both hinges move of m (n_i x (c - p_i)) .
+        (n_j x (c - p_j)) + n_i I n_j, expanded into dot products."""
+        p, axis, s0, s1 = self.p, self.axis, self.s0, self.s1
+        tr2 = np.trace(self.s2, axis1=1, axis2=2)
+        s2n = np.einsum("nij,nj->ni", self.s2 - self.si, axis)  # (s2 - si) n_j
+        s1n = (s1 * axis).sum(1)
+        pi, pj, ni, nj = p[i], p[j], axis[i], axis[j]
+        scal = tr2[j] - (s1[j] * (pi + pj)).sum(1) + s0[j] * (pi * pj).sum(1)
+        ni_pj, pi_nj = (ni * pj).sum(1), (pi * nj).sum(1)
+        return ((ni * nj).sum(1) * scal - (ni * s2n[j]).sum(1)
+                + (ni * s1[j]).sum(1) * pi_nj + ni_pj * s1n[j] - s0[j] * ni_pj * pi_nj)
+
+    def stiffness(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Gravity's K_g entries: d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j)),
+        n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j) (= n_i . gravity_axis_j)."""
+        ni, nj, r, g = self.axis[i], self.axis[j], self.lever[j], self.gravity
+        return -((nj @ g) * (ni * r).sum(1) - (r @ g) * (ni * nj).sum(1))
+
+    def gravity_axis(self) -> np.ndarray:
+        """g_j (2B, 3) N m: K_g's entry (i, j) is n_i . g_j."""
+        g, r, nj = self.gravity, self.lever, self.axis
+        return -((nj @ g)[:, None] * r - (r @ g)[:, None] * nj)
 
 
 class JointSpace:
@@ -78,17 +124,20 @@ class JointSpace:
         parent[0::2] = np.where(bones.parent >= 0, 2 * bones.parent + 1, -1)
         parent[1::2] = np.arange(0, n, 2)
         self.parent = parent
-        depth = depths(parent)
-        anc = ancestor_table(parent, depth)
         self.sums = ChainSums(layout.chain_bones, layout.chain_parent, layout.chain_depth, nb)
-        # every (upstream i, downstream j) pair, root-aligned: i = anc[j, t]
-        jj, tt = np.nonzero(np.arange(anc.shape[1])[None, :] < depth[:, None])
-        self._shape = (anc.shape, jj, tt)
-        self._pairs = (anc[jj, tt], jj)
         self.k_spring = np.repeat(bones.k, 2)
-        limb = layout.bone_chain[dof_bone]
-        self._same_limb = limb[self._pairs[0]] == limb[self._pairs[1]]
+        self.limb = limb = layout.bone_chain[dof_bone]
+        # a dof whose parent is in another limb (or none): the limb damping
+        # couples nothing across it
+        self.cut = (parent < 0) | (limb != limb[np.maximum(parent, 0)])
         self.alpha = bones.alpha[dof_bone]
+        # a deep tree (a long chain) takes the low-rank factor (lowrank.py),
+        # in time linear in its dofs, about each tree's base (not the world's
+        # origin: its recursion then cancels no more digits than a tree's
+        # size); the others the explicit one (treefactor.py), entry by entry
+        # (O(n x depth)), faster for bushy trees' short paths
+        self.deep = n > 0 and int(depths(parent).max()) > EXPLICIT_DEPTH
+        self.origin = bones.pivot0[bones.offsets[bones.bone_tree]] if self.deep else None
         self.gravity = np.asarray(gravity, dtype=float)
         # the solve runs chain by chain: a bone chain's dofs, in order
         self._chains = [np.stack([2 * b, 2 * b + 1], 1).ravel() for b in layout.chain_bones]
@@ -154,41 +203,26 @@ class JointSpace:
         si = sums.suffix(inertia.reshape(nb, 9).T).T.reshape(nb, 3, 3)
         axis = hinges.reshape(self.n, 3)
         p = pivot[dof_bone]
-        lever = s1[dof_bone] - s0[dof_bone][:, None] * p  # sum m (c - p_j) over a dof's subtree
-        gravity = self.gravity
-        ii, jj = self._pairs
-
-        # M_ij = sum over the bodies both hinges move of m (n_i x (c - p_i)) .
-        # (n_j x (c - p_j)) + n_i I n_j, in the subtree moments s0, s1, s2, si
-        # of j's bone, expanded into dot products (no 3 x 3 per pair)
-        s0j, s1j = s0[dof_bone], s1[dof_bone]
-        tr2 = np.trace(s2, axis1=1, axis2=2)[dof_bone]
-        # (s2 - si) n_j and s1 . n_j per dof j
-        s2n = np.einsum("nij,nj->ni", s2[dof_bone] - si[dof_bone], axis)
-        s1n = (s1j * axis).sum(1)
-
-        def mass_entry(i, j):
-            pi, pj, ni, nj = p[i], p[j], axis[i], axis[j]
-            scal = tr2[j] - (s1j[j] * (pi + pj)).sum(1) + s0j[j] * (pi * pj).sum(1)
-            ni_pj, pi_nj = (ni * pj).sum(1), (pi * nj).sum(1)
-            return ((ni * nj).sum(1) * scal - (ni * s2n[j]).sum(1)
-                    + (ni * s1j[j]).sum(1) * pi_nj + ni_pj * s1n[j] - s0j[j] * ni_pj * pi_nj)
-
-        def gravity_entry(i, j):
-            # d2 V / dq_i dq_j = -g . (n_i x (n_j x R_j));
-            # n_i x (n_j x R) = n_j (n_i.R) - R (n_i.n_j)
-            ni, nj, r = axis[i], axis[j], lever[j]
-            return -((nj @ gravity) * (ni * r).sum(1) - (r @ gravity) * (ni * nj).sum(1))
-
+        pr, s1o, s2o = p, s1[dof_bone], s2[dof_bone]
+        if self.deep:  # about each tree's base o: fewer digits cancel
+            o = self.origin
+            c = com - o
+            pr = p - o[dof_bone]
+            s1o = sums.suffix((m[:, None] * c).T).T[dof_bone]
+            s2o = sums.suffix((m[:, None, None] * c[:, :, None] * c[:, None, :]).reshape(
+                nb, 9).T).T.reshape(nb, 3, 3)[dof_bone]
+        lever = s1o - s0[dof_bone][:, None] * pr  # sum m (c - p_j) over a dof's subtree
+        self.entries = entries = Entries(pr, axis, s0[dof_bone], s1o, s2o, si[dof_bone], lever,
+                                         self.gravity)
         every = np.arange(self.n)
-        m_diag, m_low = mass_entry(every, every), mass_entry(ii, jj)
-        k_diag = self.k_spring + gravity_entry(every, every)
-        k_low = gravity_entry(ii, jj)
+        m_diag = entries.mass(every, every)
+        k_diag = self.k_spring + entries.stiffness(every, every)
         # structural damping: each limb's block of M times its alpha
-        c_diag = limb_damping(m_diag, self.alpha)
-        c_low = limb_damping(m_low, self.alpha[jj], self._same_limb)
-        self.matrices = (m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj)
-        self._factors: dict[tuple[float, float], TreeFactor] = {}
+        self.diagonals = (m_diag, limb_damping(m_diag, self.alpha), k_diag)
+        self._factors: dict[tuple[float, float], TreeFactor | LowRankFactor] = {}
+        self._pairs = None if self.deep else self.pair_entries()
+        if self.deep:
+            self._low_rank(pr, axis, s0[dof_bone], s1o, s2o, si[dof_bone])
         # the rates' Jacobian: hinge axes and n x p at this pose, and COMs
         cp = cross(axis, p).reshape(nb, 2, 3)
         self.rate_n0, self.rate_n1 = hinges[:, 0].T.copy(), hinges[:, 1].T.copy()
@@ -206,34 +240,76 @@ class JointSpace:
         spin = np.trace(l2, axis1=1, axis2=2)[:, None, None] * np.eye(3) - l2 + li
         self.lump = (l0, l1.T.copy(), spin.transpose(1, 2, 0).copy())
 
+    def _low_rank(self, p: np.ndarray, axis: np.ndarray, s0: np.ndarray, s1: np.ndarray,
+                  s2: np.ndarray, si: np.ndarray) -> None:
+        """The entries between a dof i and its descendant j in low-rank form
+        (lowrank.py), from Entries' moments per dof: M_ij = S_i . (I_j S_j),
+        S_i hinge i's spatial axis (n_i, p_i x n_i), I_j the spatial inertia
+        of all hinge j moves; K_g's entry is n_i . g_j."""
+        moved = cross(p, axis)
+        self.spatial = np.concatenate([axis, moved], 1)
+        turn = (np.trace(s2, axis1=1, axis2=2)[:, None] * axis
+                - np.einsum("nij,nj->ni", s2 - si, axis) + cross(s1, moved))
+        push = cross(axis, s1) + s0[:, None] * moved
+        self.inertia_axis = np.concatenate([turn, push], 1)
+        self.gravity_axis = self.entries.gravity_axis()
+
     @property
-    def factor(self) -> TreeFactor:
+    def factor(self) -> TreeFactor | LowRankFactor:
         """The factored M + c1 C + c2 K of the tier's whole step (built when
         first asked: while its steps are split, only the parts' is)."""
         return self.factor_for(*self._steps)
 
     @property
-    def mass_factor(self) -> TreeFactor:
+    def mass_factor(self) -> TreeFactor | LowRankFactor:
         """The factored M (for accelerations from forces)."""
         return self.factor_for(0.0, 0.0)
 
-    def factor_for(self, c1: float, c2: float) -> TreeFactor:
+    def factor_for(self, c1: float, c2: float) -> TreeFactor | LowRankFactor:
         """The factored M + c1 C + c2 K (cached)."""
         key = (c1, c2)
         if key not in self._factors:
-            m_diag, m_low, c_diag, c_low, k_diag, k_low, _ii, _jj = self.matrices
-            shape, jj, tt = self._shape
-            rows = np.zeros(shape)
-            rows[jj, tt] = m_low + c1 * c_low + c2 * k_low
-            self._factors[key] = TreeFactor(self.parent, m_diag + c1 * c_diag + c2 * k_diag,
-                                            rows, self._chains, self.layout.chain_depth)
+            if self.deep:
+                self._factors[key] = LowRankFactor(self.tree_matrix(c1, c2))
+            else:
+                (m_diag, c_diag, k_diag), (jj, tt, shape, m_low, c_low, k_low) = \
+                    self.diagonals, self._pairs[1:]
+                rows = np.zeros(shape)
+                rows[jj, tt] = m_low + c1 * c_low + c2 * k_low
+                self._factors[key] = TreeFactor(self.parent, m_diag + c1 * c_diag + c2 * k_diag,
+                                                rows, self._chains, self.layout.chain_depth)
         return self._factors[key]
 
+    def tree_matrix(self, c1: float, c2: float) -> TreeMatrix:
+        """M + c1 C + c2 K in low-rank form: across limbs M + c2 K_g, within
+        a limb also c1 C (generators (S, S) and (I S + c2 g, c1 alpha I S))."""
+        m_diag, c_diag, k_diag = self.diagonals
+        across = self.inertia_axis.copy()
+        across[:, 0:3] += c2 * self.gravity_axis
+        within = (c1 * self.alpha)[:, None] * self.inertia_axis
+        keep = np.arange(12) < 6
+        return TreeMatrix(self.parent, m_diag + c1 * c_diag + c2 * k_diag,
+                          np.concatenate([self.spatial, self.spatial], 1),
+                          np.concatenate([across, within], 1), self.cut, keep, self._chains)
+
+    def pair_entries(self) -> tuple:
+        """Every (upstream i, downstream j) pair, root-aligned (i is j's
+        ancestor at depth t: (ii, jj, tt), the table's shape) and M's, C's
+        and K's entries there: O(n x depth)."""
+        depth = depths(self.parent)
+        anc = ancestor_table(self.parent, depth)
+        jj, tt = np.nonzero(np.arange(anc.shape[1])[None, :] < depth[:, None])
+        ii = anc[jj, tt]
+        m_low = self.entries.mass(ii, jj)
+        c_low = limb_damping(m_low, self.alpha[jj], self.limb[ii] == self.limb[jj])
+        return ii, jj, tt, anc.shape, m_low, c_low, self.entries.stiffness(ii, jj)
+
     def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """M, C and the tangent stiffness K_s + K_g as dense matrices (checks)."""
-        m_diag, m_low, c_diag, c_low, k_diag, k_low, ii, jj = self.matrices
+        """M, C and the tangent stiffness K_s + K_g as dense matrices, entry
+        by entry from the subtree moments (checks: O(n^2) memory)."""
+        ii, jj, _tt, _shape, *lows = self._pairs or self.pair_entries()
         out = []
-        for diag, low in ((m_diag, m_low), (c_diag, c_low), (k_diag, k_low)):
+        for diag, low in zip(self.diagonals, lows, strict=True):
             a = np.diag(diag)
             a[jj, ii] = low
             a[ii, jj] = low
