@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from . import library, loop
 from .errors import InputError, SceneError
-from .keys import INTERPOLATIONS, Keyed
+from .keys import Keyed
 from .names import MAX_TREE_NAME, is_valid, make_valid
 from .quality import QUALITIES, Quality
 from .scene_flows import DownwashSpec, GustSpec, read_downwash, read_gust
@@ -43,7 +43,7 @@ from .scene_keys import (
     VORTEX,
     WIND,
 )
-from .settings import Key
+from .scene_reader import INTERPOLATION, SceneReader, is_keys
 
 __all__ = ["BEAUFORT", "Scene", "load_job", "load_scene", "parse_scene"]
 
@@ -186,146 +186,6 @@ class Scene:
         return round(self.duration * self.fps) + 1
 
 
-# ---------------------------------------------------------------------------
-# validation helpers
-
-INTERPOLATION = "_interpolation"  # `speed_interpolation`: how `speed`'s keys interpolate
-KEYS_FORM = "[{time = ..., value = ...}, ...]"
-
-
-def is_keys(value: Any) -> bool:
-    """Whether a scene value is a list of keys (tables), not a plain value."""
-    return isinstance(value, list) and any(isinstance(x, dict) for x in value)
-
-
-class _Reader:
-    """Reads keys by their scene_keys.Key: type, default and range checks,
-    errors naming the key, the value and the range with its unit."""
-
-    _UNSET = object()
-
-    def __init__(self, file: str):
-        self.file = file
-        self.tree_names: set[str] = set()
-        self.horizon = math.inf  # s: keys' times must be within [0, horizon] (the shot)
-
-    def fail(self, key: str, message: str) -> SceneError:
-        return SceneError(key, message, self.file)
-
-    def table(self, data: Any, key: str) -> dict:
-        if not isinstance(data, dict):
-            raise self.fail(key, f"must be a table, got {type(data).__name__}")
-        return data
-
-    def check_keys(self, data: dict, path: str, allowed) -> None:
-        """Every key of `data` is in `allowed` (names or a table of Keys,
-        whose keyed ones also take `<name>_interpolation`, beside keys)."""
-        if isinstance(allowed, dict):
-            keyed = [k for k, spec in allowed.items() if spec.keyed]
-            allowed = [*allowed, *(f"{k}{INTERPOLATION}" for k in keyed)]
-            for k in keyed:
-                if f"{k}{INTERPOLATION}" in data and not is_keys(data.get(k)):
-                    raise self.fail(f"{path}{k}{INTERPOLATION}",
-                                    f"applies to keys, and {path}{k} is not a list of keys")
-        for k in data:
-            if k not in allowed:
-                raise self.fail(f"{path}{k}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
-
-    def key(self, data: dict, spec: Key, path: str, default: Any = _UNSET,
-            hi: float | None = None) -> Any:
-        """The value of `spec` in `data` (its default when absent; `default`
-        and `hi` override the table's where they depend on the scene)."""
-        full = f"{path}{spec.name}"
-        default = spec.default if default is self._UNSET else default
-        if spec.keyed and is_keys(data.get(spec.name)):
-            return self.keyed(data, spec, path, hi)
-        if spec.name not in data:
-            if default is None and spec.required:
-                raise self.fail(full, "is required")
-            return default
-        v = data[spec.name]
-        hi = spec.hi if hi is None else hi
-        if spec.keyed and v == []:
-            raise self.fail(full, f"is an empty list: give a value or keys {KEYS_FORM}")
-        if spec.kind in ("number", "integer"):
-            return self._number(full, v, spec, hi)
-        if spec.kind == "bool":
-            if not isinstance(v, bool):
-                raise self.fail(full, f"must be true or false, got {v!r}")
-            return v
-        if spec.kind in ("string", "choice"):
-            if not isinstance(v, str):
-                raise self.fail(full, f"must be a string, got {v!r}")
-            if spec.choices and v not in spec.choices:
-                raise self.fail(full, f"= {v!r} is not one of: {', '.join(spec.choices)}")
-            return v
-        if spec.kind == "vector":
-            if not isinstance(v, list) or len(v) != spec.n or not all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                keys = f", or keys {KEYS_FORM}" if spec.keyed else ""
-                raise self.fail(full, f"must be a list of {spec.n} numbers{keys}, got {v!r}")
-            for x in v:
-                if not spec.lo <= x <= spec.hi:
-                    raise self.fail(full, f"value {x!r} is out of range {spec.range_text()}"
-                                    + (f" {spec.unit.split()[0]}" if spec.unit else ""))
-            return tuple(float(x) for x in v)
-        raise ValueError(f"key kind {spec.kind!r} is read by its own code")
-
-    def _number(self, full: str, v, spec: Key, hi) -> Any:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            keys = f", or keys {KEYS_FORM}" if spec.keyed else ""
-            raise self.fail(full, f"must be a number{keys}, got {v!r}")
-        integer = spec.kind == "integer"
-        if integer and int(v) != v:
-            raise self.fail(full, f"must be a whole number, got {v!r}")
-        lo = -math.inf if spec.lo is None else spec.lo
-        top = math.inf if hi is None else hi
-        if not (lo <= v <= top) or (isinstance(v, float) and math.isnan(v)):
-            shown = Key(spec.name, "", spec.unit, lo=spec.lo, hi=hi)
-            raise self.fail(full, shown.out_of_range(v))
-        return int(v) if integer else float(v)
-
-    def keyed(self, data: dict, spec: Key, path: str, hi: float | None = None,
-              convert=None) -> Keyed:
-        """The keys of `spec` in `data` (a list of {time, value} tables) as
-        a Keyed curve with the interpolation `<name>_interpolation` names
-        (linear unless given): each time within the shot and later than
-        the one before, each value checked as the key's plain value is
-        (then passed through `convert`, e.g. a Beaufort name to m/s)."""
-        full = f"{path}{spec.name}"
-        times: list[float] = []
-        values: list = []
-        plain = replace(spec, name="value", keyed=False)
-        shot = Key("time", "", "s", lo=0.0, hi=self.horizon)
-        for i, k in enumerate(data[spec.name]):
-            kp = f"{full}[{i}]"
-            if not isinstance(k, dict):
-                raise self.fail(kp, f"must be a key {{time, value}}, got {k!r}")
-            self.check_keys(k, f"{kp}.", ("time", "value"))
-            for need in ("time", "value"):
-                if need not in k:
-                    raise self.fail(f"{kp}.{need}", "is required")
-            t = self._number(f"{kp}.time", k["time"], shot, self.horizon)
-            if times and t <= times[-1]:
-                raise self.fail(f"{kp}.time", f"= {t:g} s must be later than the key before "
-                                f"it ({times[-1]:g} s): keys go in time order, one per time")
-            value = self.key({"value": k["value"]}, plain, f"{kp}.", hi=hi)
-            times.append(t)
-            values.append(value if convert is None else convert(value))
-        name = f"{full}{INTERPOLATION}"
-        how = data.get(f"{spec.name}{INTERPOLATION}", "linear")
-        if not isinstance(how, str) or how not in INTERPOLATIONS:
-            raise self.fail(name, f"= {how!r} is not one of: {', '.join(INTERPOLATIONS)}")
-        return Keyed(tuple(times), tuple(values), how, angular=spec.unit == "degrees")
-
-    def keys(self, data: dict, table: dict[str, Key], path: str, **given) -> dict:
-        """Every key of a table that plain reading covers, checked; `given`
-        are values the caller reads itself."""
-        self.check_keys(data, path, table)
-        return {name: given[name] if name in given else self.key(data, spec, path)
-                for name, spec in table.items()}
-
-
 def with_wind_speed(wind: Any, speed: Any) -> Any:
     """A `[wind]` table with its speed (m/s at 10 m) replaced by `speed`:
     its `beaufort` and either's keys' interpolation go (the override is
@@ -406,7 +266,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     """A Scene from a scene file's table. Keys' times must lie within the
     shot, 0 to `duration` s (or to `horizon` s where that is longer: the
     file's duration when an override shortened it, key_horizon)."""
-    r = _Reader(file)
+    r = SceneReader(file)
     r.check_keys(raw, "", TOP)
     scene = Scene(
         name=r.key(raw, TOP["name"], "", Path(file).stem),
@@ -472,7 +332,7 @@ def parse_scene(raw: dict, file: str = "<scene>", base: Path = Path("."),
     return scene
 
 
-def _vortex(r: _Reader, v: dict, p: str) -> VortexSpec:
+def _vortex(r: SceneReader, v: dict, p: str) -> VortexSpec:
     """A vortex: its centre from `start` (and `velocity`) or from `path`."""
     spec = VortexSpec(**r.keys(v, VORTEX, p))
     if spec.path is None and spec.start is None:
@@ -485,12 +345,12 @@ def _vortex(r: _Reader, v: dict, p: str) -> VortexSpec:
     return spec
 
 
-def _check_interval(r: _Reader, spec, p: str) -> None:
+def _check_interval(r: SceneReader, spec, p: str) -> None:
     if spec.end < spec.time:
         raise r.fail(f"{p}end", f"= {spec.end:g} s is before time ({spec.time:g} s)")
 
 
-def _array(r: _Reader, raw: dict, key: str) -> list[dict]:
+def _array(r: SceneReader, raw: dict, key: str) -> list[dict]:
     v = raw.get(key, [])
     if isinstance(v, dict):
         v = [v]
@@ -506,7 +366,7 @@ REMOVED_QUALITY_KEYS = {  # keys of older scenes, and what became of them
 }
 
 
-def _quality(r: _Reader, q: Any) -> Quality:
+def _quality(r: SceneReader, q: Any) -> Quality:
     if isinstance(q, str):
         if q not in QUALITIES:
             raise r.fail("quality", f"= {q!r} is not one of: {', '.join(QUALITIES)}")
@@ -553,7 +413,7 @@ def _name_trees(trees: list[TreeSpec]) -> None:
         taken.add(name)
 
 
-def _tree_name(r: _Reader, t: dict, p: str, given: set[str]) -> str:
+def _tree_name(r: SceneReader, t: dict, p: str, given: set[str]) -> str:
     if "name" not in t:
         return ""
     name = r.key(t, TREE["name"], p)
@@ -569,7 +429,7 @@ def _tree_name(r: _Reader, t: dict, p: str, given: set[str]) -> str:
     return name
 
 
-def _grammar_file(r: _Reader, value: str, key: str, base: Path) -> Path:
+def _grammar_file(r: SceneReader, value: str, key: str, base: Path) -> Path:
     """A scene's grammar: a file relative to the scene, else a bundled
     grammar named as on the command line (`oak`, `grammar:forest/birch`)."""
     path = base / value
@@ -584,14 +444,14 @@ def _grammar_file(r: _Reader, value: str, key: str, base: Path) -> Path:
                       "`treebake list` shows them)")
 
 
-def _tree(r: _Reader, t: dict, p: str, base: Path) -> TreeSpec:
+def _tree(r: SceneReader, t: dict, p: str, base: Path) -> TreeSpec:
     r.check_keys(t, p, TREE)
     grammar = _grammar_file(r, r.key(t, TREE["grammar"], p), f"{p}grammar", base)
     return TreeSpec(**r.keys(t, TREE, p, grammar=grammar,
                              name=_tree_name(r, t, p, r.tree_names)))
 
 
-def _forest(r: _Reader, f: dict, base: Path, scene_seed: int, first: int) -> list[TreeSpec]:
+def _forest(r: SceneReader, f: dict, base: Path, scene_seed: int, first: int) -> list[TreeSpec]:
     p = "forest."
     r.check_keys(f, p, FOREST)
     grammars = f.get("grammars")
@@ -656,7 +516,7 @@ def beaufort_speed(name: str) -> float:
     return 0.5 * (BEAUFORT[name] + hi)
 
 
-def _wind(r: _Reader, w: dict) -> WindSpec:
+def _wind(r: SceneReader, w: dict) -> WindSpec:
     p = "wind."
     r.check_keys(w, p, WIND)
     if "beaufort" in w:
@@ -678,7 +538,7 @@ def _wind(r: _Reader, w: dict) -> WindSpec:
     return spec
 
 
-def _camera(r: _Reader, c: dict) -> CameraSpec:
+def _camera(r: SceneReader, c: dict) -> CameraSpec:
     p = "camera."
     r.check_keys(c, p, CAMERA)
     keys_raw = c.get("keys")
