@@ -13,7 +13,7 @@ n = (-dh/du, -dh/dv, 1) / |..| (x right = +u, y up = +v: glTF's and USD's
 tangent-space convention, OpenGL's "Y+") as round(255 (n + 1) / 2).
 
 Species (by the grammar's file name, `species_of`): oak (deep furrows
-between long ridges, cross-cracked into blocks), spruce and the forest
+between long ridges), spruce and the forest
 conifer (thin scales), birch (white with dark horizontal lenticels and
 dark patches), palm (rings of leaf scars), willow (a network of deep
 interlacing furrows), bamboo (a smooth green culm with raised nodes),
@@ -115,9 +115,6 @@ def _pattern(style: BarkStyle, h: int, w: int, rng: np.random.Generator):
         ridges = _fractal(rng, h, w, cells)
         fine = _fractal(rng, h, w, ((64, 64, 2), (128, 128, 1)))
         plate = np.minimum(np.abs(ridges - 32768) * (3 if p == "ridges" else 4), 65535)
-        if p == "ridges":  # cross-cracks break the ridges into blocks
-            crack = _fractal(rng, h, w, ((32, 8, 1),))
-            plate = np.where(np.abs(crack - 32768) < 1400, plate // 3, plate)
         height = (plate * 3 + fine) // 4
         return height, height
     if p == "scales":
