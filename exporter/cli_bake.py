@@ -136,7 +136,7 @@ def export_options(args, allow_none: bool = False):
 
     from .exchange.anim import ReduceOptions
     from .exchange.mesh import MeshOptions
-    from .export import FORMATS, ExportOptions, parse_formats
+    from .export import FORMATS, ExportOptions, parse_detail, parse_formats
 
     text = getattr(args, "format", None)
     formats = parse_formats(text if text is not None else "glb")
@@ -151,7 +151,8 @@ def export_options(args, allow_none: bool = False):
                              enabled=not args.no_reduce),
         split=args.split, obj_stride=args.stride, preview_size=args.size,
         frame_start=args.frame_start, textures=not args.no_textures,
-        trees_per_file=args.trees_per_file, usd_layers=args.usd_layers)
+        trees_per_file=args.trees_per_file, usd_layers=args.usd_layers,
+        **parse_detail(args.detail))
 
 
 def run_export(bake, bake_path, out, name, opts, args):

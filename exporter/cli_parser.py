@@ -108,6 +108,10 @@ EXPORT_OPTIONS = Group("export options", (
     opt("--no-leaves", action="store_true", help="no leaf quads"),
     opt("--no-textures", action="store_true",
         help="plain colour materials instead of the generated bark and leaf textures"),
+    opt("--detail", default="default", metavar="LEVEL[,TREE=LEVEL...]",
+        help="triangles and textures for the camera's distance: hero, default or far, for "
+             "every tree, then per tree by name (e.g. far,oak=hero); export-time only, the bake "
+             "is the same (default: default)"),
     opt("--radial", type=int, default=8, help="vertices around a bark ring, 3-64 (default 8)"),
     opt("--rings", type=int, default=1, help="bark rings per segment, 1-16 (default 1)"),
     opt("--position-tolerance", type=float, default=0.002,

@@ -15,10 +15,13 @@ from pathlib import Path
 
 from . import __version__
 from .bake import FAST_TURN_DEG, Bake
-from .bake_file import StoredTrees, check_finite, tree_field
+from .bake_file import StoredTrees, check_finite, tree_field, tree_info
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
-from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, part_materials_of, tree_mesh
+from .exchange.textures import TextureMap
+from .exchange.bark import bark_material
+from .exchange.mesh import (DETAIL, MeshOptions, TreeMesh, broken_joints, detail_options,
+                            part_materials_of, tree_mesh)
 from .fileio import atomic_path, write_bytes, write_text
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
@@ -38,7 +41,11 @@ class ExportOptions:
     obj_stride: write every n-th frame of OBJ sequences; preview_size: px
     per view panel; frame_start: the number of the bake's first frame in
     every format (None: the bake's, from its scene; default 1); textures:
-    generated bark and leaf-card textures (False: plain colours)."""
+    generated bark and leaf-card textures (False: plain colours); detail:
+    the level (mesh.DETAIL: hero, default, far) of every tree's bark tubes,
+    foliage cards and textures, `detail_trees` ((tree name, level), ...)
+    overriding it per tree (geometry only: textures follow `detail`).
+    Export-time only: the bake does not depend on it."""
 
     formats: tuple[str, ...] = ("glb",)
     mesh: MeshOptions = field(default_factory=MeshOptions)
@@ -50,6 +57,8 @@ class ExportOptions:
     textures: bool = True
     trees_per_file: int | None = None  # glTF: at most this many trees a file (None: auto)
     usd_layers: str = "auto"  # "one" file, a layer per "tree", or "auto"
+    detail: str = "default"  # mesh.DETAIL level
+    detail_trees: tuple[tuple[str, str], ...] = ()  # (tree name, level) overrides
 
 
 # a shot of more trees is written as glTF files of this many trees and as a
@@ -85,6 +94,19 @@ def parse_formats(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
     return tuple(out)
 
 
+def parse_detail(text: str) -> dict:
+    """"far,oak=hero" -> {"detail": "far", "detail_trees": (("oak", "hero"),)}
+    (levels checked by check_options)."""
+    level, trees = "default", []
+    for item in (x.strip() for x in str(text).split(",")):
+        if "=" in item:
+            tree, _, lvl = item.partition("=")
+            trees.append((tree.strip(), lvl.strip().lower()))
+        elif item:
+            level = item.lower()
+    return {"detail": level, "detail_trees": tuple(trees)}
+
+
 def check_options(opts: ExportOptions) -> None:
     m, r = opts.mesh, opts.reduce
     if not 3 <= m.radial <= 64:
@@ -104,6 +126,10 @@ def check_options(opts: ExportOptions) -> None:
         raise InputError(f"--trees-per-file must be >= 1, got {opts.trees_per_file}")
     if opts.usd_layers not in ("auto", "one", "tree"):
         raise InputError(f"--usd-layers must be auto, one or tree, got {opts.usd_layers!r}")
+    for tree, level in (("", opts.detail), *opts.detail_trees):
+        if level not in DETAIL:
+            raise InputError(f"--detail {tree + '=' if tree else ''}{level!r}: the level must "
+                             f"be one of {', '.join(DETAIL)}")
     if opts.frame_start is not None and not 0 <= opts.frame_start <= MAX_FRAME_START:
         raise InputError(f"--frame-start must be in 0..{MAX_FRAME_START}, got "
                          f"{opts.frame_start}")
@@ -155,8 +181,11 @@ class TreeMeshes(Sequence[TreeMesh]):
     for it (the last one kept), so an export holds one tree's mesh, not the
     shot's; what the manifest says of each tree is noted as it is built."""
 
-    def __init__(self, bake: Bake, opts: MeshOptions):
+    def __init__(self, bake: Bake, opts: MeshOptions, detail: str = "default",
+                 detail_trees: tuple[tuple[str, str], ...] = (), species: bool = False):
         self.bake, self.opts = bake, opts
+        self.detail, self.detail_trees = detail, dict(detail_trees)
+        self.species = species  # bark materials per species (bark.bark_material)
         self.facts: dict[int, TreeFacts] = {}
         self._last: tuple[int, TreeMesh] | None = None
 
@@ -170,7 +199,7 @@ class TreeMeshes(Sequence[TreeMesh]):
         if self._last is None or self._last[0] != i:
             tree = self.bake.trees[i]
             broken = broken_joints(tree)
-            mesh = tree_mesh(tree, self.opts, broken)
+            mesh = tree_mesh(tree, self.tree_options(i), broken)
             self.facts[i] = TreeFacts(
                 {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
                  "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
@@ -180,6 +209,13 @@ class TreeMeshes(Sequence[TreeMesh]):
                 mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
             self._last = (i, mesh)
         return self._last[1]
+
+    def tree_options(self, i: int) -> MeshOptions:
+        """Tree i's mesh options: its detail level, its species' bark."""
+        info = tree_info(self.bake.trees, i)
+        name = str(info.get("name"))
+        bark = bark_material(info.get("grammar")) if self.species else self.opts.bark
+        return detail_options(self.opts, self.detail_trees.get(name, self.detail), bark)
 
     def __iter__(self) -> Iterator[TreeMesh]:
         for i in range(len(self)):
@@ -227,6 +263,7 @@ def _settings(opts: ExportOptions) -> dict:
             "split": opts.split, "trees_per_file": opts.trees_per_file,
             "usd_layers": opts.usd_layers, "obj_stride": opts.obj_stride,
             "frame_start": opts.frame_start, "textures": opts.textures,
+            "detail": opts.detail, "detail_trees": dict(opts.detail_trees),
             "preview_size_px": opts.preview_size, "up_axis": "Y", "units": "m"}
 
 
@@ -251,9 +288,10 @@ def _textures(bake: Bake, opts: ExportOptions) -> dict:
     from .exchange.textures import texture_for
 
     names = set()
+    meshes = TreeMeshes(bake, opts.mesh, opts.detail, opts.detail_trees, species=True)
     for i in range(len(bake.trees)):
-        names.update(part_materials_of(tree_field(bake.trees, i, "leaf"), opts.mesh))
-    return {n: texture_for(n) for n in sorted(names)}
+        names.update(part_materials_of(tree_field(bake.trees, i, "leaf"), meshes.tree_options(i)))
+    return {n: texture_for(n, opts.detail) for n in sorted(names)}
 
 
 @dataclass(frozen=True)
@@ -290,15 +328,22 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     if not name or any(c in name for c in "/\\") or name in (".", ".."):
         raise InputError(f"job name {name!r} cannot be a folder name")
     folder = Path(out) / name
+    names = {str(tree_info(bake.trees, i).get("name")) for i in range(len(bake.trees))}
+    for tree, _ in opts.detail_trees:
+        if tree not in names:
+            raise InputError(f"--detail {tree}=...: the bake has no tree named {tree!r}")
     bake_path = Path(bake_path) if bake_path is not None else None
     tick = progress or (lambda stage, done, total: None)
-    meshes = TreeMeshes(bake, opts.mesh)
+    # species' barks with the textures; --no-textures keeps the one plain "bark"
+    meshes = TreeMeshes(bake, opts.mesh, opts.detail, opts.detail_trees, species=opts.textures)
     manifest: dict = {"tool": f"treebake {__version__}", "job": name,
                       "settings": _settings(opts), "frames": {}}
     n = len(bake.times)
     first = frame_start(bake, opts)
     textures = _textures(bake, opts)
-    maps = {m: (f"textures/{t.name}", t.cutout) for m, t in textures.items() if t is not None}
+    maps = {m: TextureMap(f"textures/{t.name}", t.cutout,
+                          None if t.normal is None else f"textures/{t.normal.name}")
+            for m, t in textures.items() if t is not None}
     job = _Job(bake, meshes, folder, name, opts, first, textures, maps, tick)
     files = _write_texture_pngs(job)
     files += _write_gltf(job, manifest)
@@ -339,6 +384,8 @@ def _write_texture_pngs(job: _Job) -> list[Path]:
     # PNGs beside the files that reference them (obj/textures/, textures/): a
     # reader need not follow paths out of its file's folder (trimesh refuses)
     pngs = {t.name: t.png for t in job.textures.values() if t is not None}
+    pngs |= {t.normal.name: t.normal.png for t in job.textures.values()
+             if t is not None and t.normal is not None}
     files: list[Path] = []
     for sub, fmts in (("obj", ("obj",)), ("", ("usd", "usda"))):
         if any(f in job.opts.formats for f in fmts):

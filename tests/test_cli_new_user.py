@@ -81,8 +81,10 @@ def test_an_obj_sequence_prints_as_one_entry(tmp_path, monkeypatch, capsys):
     assert main(["export", "out/sapling/sapling.npz", "--format", "obj", "--name", "again",
                  "-q"]) == 0
     line = capsys.readouterr().out.splitlines()[0]
+    # issue 40: the sapling's own bark and its normal map
     assert line.endswith(": obj/again.####.obj (3 files, 0001-0003), obj/again.mtl, "
-                         "obj/textures/bark.png, obj/textures/leaf.png, manifest.json"), line
+                         "obj/textures/bark_sapling.png, obj/textures/bark_sapling_normal.png, "
+                         "obj/textures/leaf.png, manifest.json"), line
 
 
 def test_file_lists_collapse_numbered_sequences():

@@ -77,7 +77,8 @@ def test_glb_embeds_the_textures(demo):
     _, tex, plain = demo
     g = Gltf(tex.folder / "tex.glb")
     mats = {m.name: m for m in g.g.materials}
-    assert {"bark", "leaf", "leaf2"} <= set(mats)
+    # issue 40: each species its own bark (the demo's oak, spruce and sapling)
+    assert {"bark_oak", "bark_spruce", "bark_sapling", "leaf", "leaf2"} <= set(mats)
     for name, m in mats.items():
         info = m.pbrMetallicRoughness.baseColorTexture
         assert info is not None
@@ -99,7 +100,7 @@ def test_obj_mtl_references_the_textures_trimesh_loads_them(demo):
     trimesh = need("trimesh")
     _, tex, plain = demo
     mtl = (tex.folder / "obj" / "tex.mtl").read_text()
-    assert "map_Kd textures/bark.png" in mtl and "map_d textures/leaf.png" in mtl
+    assert "map_Kd textures/bark_oak.png" in mtl and "map_d textures/leaf.png" in mtl
     for line in mtl.splitlines():
         if line.startswith("map_"):
             assert (tex.folder / "obj" / line.split()[1]).is_file()
@@ -116,7 +117,7 @@ def test_usd_preview_surfaces_read_the_texture_files(demo):
 
     _, tex, plain = demo
     stage = Usd.Stage.Open(str(tex.folder / "tex.usda"))
-    for name in ("bark", "leaf", "leaf2"):
+    for name in ("bark_oak", "leaf", "leaf2"):
         surface = UsdShade.Shader(stage.GetPrimAtPath(f"/tex/Looks/{name}/PreviewSurface"))
         source = surface.GetInput("diffuseColor").GetConnectedSources()[0][0]
         reader = UsdShade.Shader(source.source.GetPrim())
@@ -141,4 +142,6 @@ def test_no_textures_flag(tmp_path, capsys):
     assert not (tmp_path / "n" / "obj" / "textures").exists()
     assert main(["export", str(bake), "--format", "obj", "--out", str(tmp_path), "--name",
                  "t", "-q"]) == 0
-    assert (tmp_path / "t" / "obj" / "textures" / "bark.png").is_file()
+    # issue 40: the calm preset's oak gets the oak's bark and its normal map
+    assert (tmp_path / "t" / "obj" / "textures" / "bark_oak.png").is_file()
+    assert (tmp_path / "t" / "obj" / "textures" / "bark_oak_normal.png").is_file()

@@ -84,15 +84,17 @@ def _across(v: np.ndarray, r: np.ndarray) -> np.ndarray:
     return _unit(out)
 
 
-def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int) -> np.ndarray:
+def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int,
+                scale: float = 1.0) -> np.ndarray:
     """(N,) cards per leafy segment (base p0, tip p1 (N, 3) m, leaf size
     (N,) m): the sleeve's count (module doc) over sqrt(k), k the leafy
     segments whose midpoints fall in the same cube of edge 2 e (e the
     median card edge; cubes from the midpoints' mean, so a tree moved in a
     scene keeps its counts), so crowded twigs (a willow's curtain) do not
-    pile up cards where their neighbours' already cover."""
+    pile up cards where their neighbours' already cover. `scale`: card
+    edges x this (an export's detail level: mesh.DETAIL)."""
     st = style(kind)
-    e = st.edge * np.asarray(size, np.float64)
+    e = st.edge * np.asarray(size, np.float64) * scale
     length = np.sqrt(((p1 - p0) ** 2).sum(1))
     sleeve = 2.0 * e * (length + e)
     card = 0.5 * st.fill * e * e
@@ -108,16 +110,17 @@ def card_counts(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, kind: int) -> 
 
 
 def cards(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, segs: np.ndarray, kind: int,
-          seed: int, centre=None):
+          seed: int, centre=None, scale: float = 1.0):
     """The cards of leafy segments `segs` (base p0, tip p1 (N, 3) m, leaf
     size (N,) m) of leaf type `kind`: positions (4C, 3), normals, UVs
     (stem at v = 0), joints and weights (rigid on the segment) and
     triangles (2C, 3), and the segment of each card (C,). Each card shows
     one cell of the leaf texture's atlas (its colour variant), by the seed.
     `centre` (m): the crown's, which the cards' fronts and shading normals
-    face away from (default: the mean of the segments' midpoints)."""
+    face away from (default: the mean of the segments' midpoints).
+    `scale`: card edges x this (card_counts)."""
     st = style(kind)
-    n = card_counts(p0, p1, size, kind)
+    n = card_counts(p0, p1, size, kind, scale)
     owner = np.repeat(np.arange(len(segs)), n)
     c = len(owner)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 40, int(kind)])
@@ -127,7 +130,7 @@ def cards(p0: np.ndarray, p1: np.ndarray, size: np.ndarray, segs: np.ndarray, ki
     out = _across(axis, _random_units(rng, c))  # away from the segment, at a random azimuth
     d = _unit(out + lean[:, None] * axis)  # the card's length: stem -> tip
     s = _across(d, _random_units(rng, c))  # its width, turned at random about d
-    e = (st.edge * size[owner])[:, None]
+    e = (st.edge * size[owner] * scale)[:, None]
     base = p0[owner] + t[:, None] * (p1 - p0)[owner]
     # the card's front (its winding's side) faces out of the crown; its shading
     # normal leans out too, so the crown shades as one mass, not card by card

@@ -163,6 +163,10 @@ class _Document:
                 pbr["baseColorFactor"] = [1, 1, 1, 1]
                 pbr["baseColorTexture"] = {"index": self.texture(tex)}
             mat = {"name": name, "pbrMetallicRoughness": pbr}
+            if tex is not None and tex.normal is not None:
+                # tangent space: the mesh's TANGENT attribute (the validator
+                # warns where a viewer would have to generate it)
+                mat["normalTexture"] = {"index": self.texture(tex.normal)}
             if tex is not None and tex.cutout:
                 mat["alphaMode"] = "MASK"
                 mat["alphaCutoff"] = 0.5
@@ -172,6 +176,10 @@ class _Document:
             self.material_ids[name] = len(self.materials) - 1
         return self.material_ids[name]
 
+    def has_normal_map(self, material: str) -> bool:
+        tex = self.texture_of.get(material)
+        return tex is not None and tex.normal is not None
+
     def mesh(self, mesh: TreeMesh, name: str, skinned: bool, offset: np.ndarray | None = None):
         """Add `mesh` (world, Z up; minus `offset` for rigid objects)."""
         b = self.buf
@@ -180,6 +188,9 @@ class _Document:
                  "NORMAL": b.add(points_y_up(mesh.normals), FLOAT, "VEC3", ARRAY_BUFFER),
                  "TEXCOORD_0": b.add(np.stack([mesh.uvs[:, 0], 1.0 - mesh.uvs[:, 1]], 1), FLOAT,
                                      "VEC2", ARRAY_BUFFER)}
+        if mesh.tangents is not None and any(self.has_normal_map(p.shader) for p in mesh.parts):
+            tangents = np.concatenate([points_y_up(mesh.tangents[:, :3]), mesh.tangents[:, 3:]], 1)
+            attrs["TANGENT"] = b.add(tangents, FLOAT, "VEC4", ARRAY_BUFFER)
         if skinned:
             joints = np.zeros((mesh.n_vertices, 4), np.uint16)
             weights = np.zeros((mesh.n_vertices, 4), np.float32)
@@ -197,8 +208,11 @@ class _Document:
                 continue
             idx = b.add(part.faces.reshape(-1), UINT if big else USHORT, "SCALAR",
                         ELEMENT_ARRAY_BUFFER)
-            prims.append({"attributes": attrs, "indices": idx,
-                          "material": self.material(part.material, part.colour,
+            # TANGENT only where the material reads it (else validator infos)
+            own = attrs if self.has_normal_map(part.shader) else \
+                {k: a for k, a in attrs.items() if k != "TANGENT"}
+            prims.append({"attributes": own, "indices": idx,
+                          "material": self.material(part.shader, part.colour,
                                                     part.double_sided)})
         self.meshes.append({"name": name, "primitives": prims})
         return len(self.meshes) - 1

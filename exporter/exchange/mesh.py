@@ -23,13 +23,20 @@ segment, capped, so debris carries no stretched skin.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..bake import TreeBake
 from ..rotations import apply, cross, matrices_from_quaternions
 from .foliage import cards
+
+
+def bark_colour(material: str) -> tuple[float, float, float]:
+    """A bark material's plain colour (linear RGB): its species' (bark.py)."""
+    from .bark import bark_colour as colour
+
+    return colour(material)
 
 BARK_COLOUR = (0.36, 0.25, 0.16)  # linear RGB
 # linear RGB, the albedo of leaves in leaf (measured green leaves reflect
@@ -48,13 +55,45 @@ def leaf_colour(kind: int) -> tuple[float, float, float]:
 class MeshOptions:
     """radial: vertices around a ring (>= 3); rings: rings per segment (>= 1);
     leaves: emit foliage cards; min_radius: m, thinner twigs are drawn this
-    thick; bark_tile: m of limb length per bark texture repeat (V)."""
+    thick; bark_tile: m of limb length per bark texture repeat (V); bark:
+    the bark's material (bark.bark_material: `bark_oak`, or `bark`);
+    card_scale: foliage card edge x this (fewer, larger cards above 1,
+    the same optical depth: foliage.card_counts)."""
 
     radial: int = 8
     rings: int = 1
     leaves: bool = True
     min_radius: float = 0.002
     bark_tile: float = 1.0
+    bark: str = "bark"
+    card_scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class DetailLevel:
+    """An export detail level (ExportOptions.detail): ring sides and rings
+    per segment of the bark tubes (None: MeshOptions' own), foliage card
+    edge scale. Export-time only: the bake is the same at every level."""
+
+    radial: int | None
+    rings: int | None
+    card_scale: float
+
+
+# `default` is today's geometry (MeshOptions as given); `far` about half
+# the triangles (square tubes, cards 2x larger and so ~2.5x
+# fewer), `hero` smoother tubes that bend over two rings a segment and
+# smaller, more numerous cards
+DETAIL = {"hero": DetailLevel(12, 2, 0.8), "default": DetailLevel(None, None, 1.0),
+          "far": DetailLevel(4, 1, 2.0)}
+
+
+def detail_options(opts: MeshOptions, level: str, bark: str = "bark") -> MeshOptions:
+    """`opts` at detail `level` (DETAIL) with the bark material `bark`."""
+    d = DETAIL[level]
+    return replace(opts, radial=opts.radial if d.radial is None else d.radial,
+                   rings=opts.rings if d.rings is None else d.rings,
+                   card_scale=opts.card_scale * d.card_scale, bark=bark)
 
 
 @dataclass
@@ -65,6 +104,13 @@ class MeshPart:
     faces: np.ndarray
     colour: tuple[float, float, float]
     double_sided: bool = False
+    look: str | None = None  # the shading material's name when not `material` ("bark_oak")
+
+    @property
+    def shader(self) -> str:
+        """The material a renderer shades this part with: `look`, else
+        `material` (the part's own name: USD prim, Alembic face set)."""
+        return self.look or self.material
 
 
 @dataclass
@@ -78,6 +124,9 @@ class TreeMesh:
     joints: np.ndarray  # (V, 2) int64 segment indices
     weights: np.ndarray  # (V, 2) float64
     parts: list[MeshPart] = field(default_factory=list)
+    # (V, 4) glTF TANGENT: unit xyz along +u, w = +1 (bitangent = N x T, along
+    # +v); bark: around the limb; other vertices any unit vector across N
+    tangents: np.ndarray | None = None
 
     @property
     def n_vertices(self) -> int:
@@ -291,6 +340,10 @@ def _bark(tree: TreeBake, opts: MeshOptions, broken: np.ndarray):
     n_st = len(st.seg)
     positions = (st.centre[:, None, :] + st.radius[:, None, None] * radial).reshape(-1, 3)
     normals = radial.reshape(-1, 3)
+    # +u runs around the ring (d radial / d phi = tangent x radial); N x T is
+    # then the limb's tangent, +v: the normal map's green
+    tangents = cross(np.broadcast_to(st.tangent[:, None, :], radial.shape).reshape(-1, 3),
+                     normals)
     v = _arc_length(st) / opts.bark_tile
     uvs = np.stack([np.broadcast_to(np.arange(k + 1) / k, (n_st, k + 1)),
                     np.broadcast_to(v[:, None], (n_st, k + 1))], axis=-1).reshape(-1, 2)
@@ -310,6 +363,7 @@ def _bark(tree: TreeBake, opts: MeshOptions, broken: np.ndarray):
     base_cap = (st.t == 0) & ((tree.seg_parent[st.seg] < 0) | broken[st.seg])
     tip_cap = st.t == 1.0
     extra_pos, extra_nrm, extra_uv, extra_j, extra_w, cap_faces = [], [], [], [], [], []
+    extra_tan = []
     n0 = len(positions)
     for sel, sign in ((np.nonzero(base_cap)[0], -1.0), (np.nonzero(tip_cap)[0], 1.0)):
         if len(sel) == 0:
@@ -317,6 +371,7 @@ def _bark(tree: TreeBake, opts: MeshOptions, broken: np.ndarray):
         centre_ids = n0 + sum(len(p) for p in extra_pos) + np.arange(len(sel))
         extra_pos.append(st.centre[sel])
         extra_nrm.append(sign * st.tangent[sel])
+        extra_tan.append(normal[sel])  # across the cap (its UV is a point: any will do)
         extra_uv.append(np.stack([np.full(len(sel), 0.5), v[sel]], 1))
         extra_j.append(st.joints[sel])
         extra_w.append(st.weights[sel])
@@ -330,11 +385,12 @@ def _bark(tree: TreeBake, opts: MeshOptions, broken: np.ndarray):
     if extra_pos:
         positions = np.concatenate([positions, *extra_pos])
         normals = np.concatenate([normals, *extra_nrm])
+        tangents = np.concatenate([tangents, *extra_tan])
         uvs = np.concatenate([uvs, *extra_uv])
         joints = np.concatenate([joints, *extra_j])
         weights = np.concatenate([weights, *extra_w])
         faces = np.concatenate([faces, *cap_faces])
-    return positions, normals, uvs, joints, weights, faces
+    return positions, normals, uvs, joints, weights, faces, tangents
 
 
 def tree_seed(tree: TreeBake) -> int:
@@ -350,11 +406,11 @@ def leaf_material(kind: int) -> str:
 
 
 def part_materials_of(leaf: np.ndarray, opts: MeshOptions = MeshOptions()) -> list[str]:
-    """The materials of the parts tree_mesh(tree, opts) makes for a tree
-    whose segments have leaf types `leaf` (TreeBake.leaf), without
+    """The shading materials of the parts tree_mesh(tree, opts) makes for a
+    tree whose segments have leaf types `leaf` (TreeBake.leaf), without
     building it."""
     leaves = np.unique(leaf[leaf > 0]) if opts.leaves else []
-    return ["bark"] + [leaf_material(k) for k in leaves]
+    return [opts.bark] + [leaf_material(k) for k in leaves]
 
 
 def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
@@ -365,8 +421,9 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
         raise ValueError("radial must be >= 3 and rings >= 1")
     if broken is None:
         broken = broken_joints(tree)
-    pos, nrm, uv, jnt, wts, faces = _bark(tree, opts, broken)
-    parts = [MeshPart("bark", faces.astype(np.int64), BARK_COLOUR)]
+    pos, nrm, uv, jnt, wts, faces, tan = _bark(tree, opts, broken)
+    look = None if opts.bark == "bark" else opts.bark
+    parts = [MeshPart("bark", faces.astype(np.int64), bark_colour(opts.bark), look=look)]
     arrays = [(pos, nrm, uv, jnt, wts)]
     offset = len(pos)
     if opts.leaves:
@@ -380,13 +437,17 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
                 tree.points[tree.seg_start[segs]].astype(np.float64),
                 tree.points[tree.seg_end[segs]].astype(np.float64),
                 tree.leaf_size[segs].astype(np.float64), segs, int(kind), tree_seed(tree),
-                centre)
+                centre, opts.card_scale)
             parts.append(MeshPart(leaf_material(kind), lf + offset, leaf_colour(kind),
                                   double_sided=True))
             arrays.append((lp, ln, lu, lj, lw))
             offset += len(lp)
     cat = [np.concatenate(x) for x in zip(*arrays)]
-    return TreeMesh(cat[0], _unit(cat[1]), cat[2], cat[3].astype(np.int64), cat[4], parts)
+    normals = _unit(cat[1])
+    across = _perpendicular(normals[len(pos):])  # cards: no normal map, any tangent
+    tangents = np.concatenate([_unit(tan), across])
+    return TreeMesh(cat[0], normals, cat[2], cat[3].astype(np.int64), cat[4], parts,
+                    np.concatenate([tangents, np.ones((len(tangents), 1))], axis=1))
 
 
 # ---------------------------------------------------------------------------

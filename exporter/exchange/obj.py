@@ -21,6 +21,7 @@ from ..bake import Bake
 from ..fileio import write_bytes
 from .axes import points_y_up
 from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh, pose, pose_rigid
+from .textures import TextureMap
 
 
 def _lines(fmt: str, array: np.ndarray) -> str:
@@ -35,11 +36,13 @@ def _safe(name: str) -> str:
 
 
 def mtl_text(materials: dict[str, tuple[float, float, float]],
-             maps: dict[str, tuple[str, bool]] | None = None) -> str:
+             maps: dict[str, TextureMap] | None = None) -> str:
     """The .mtl: per material its colour, or with `maps` (material ->
-    (relative PNG path, cutout)) its texture as map_Kd (Kd white, so readers
-    that multiply keep the texture's colour) and, for cutout cards, map_d
-    (the PNG's alpha)."""
+    TextureMap: relative PNG paths) its texture as map_Kd (Kd white, so
+    readers that multiply keep the texture's colour), for cutout cards
+    map_d (the PNG's alpha), and a tangent-space normal map as `norm` (the
+    PBR extension of MTL) and `map_Bump` (which Blender's and most
+    importers read as the normal map)."""
     maps = maps or {}
     out = [f"# treebake {__version__} materials"]
     for name, colour in materials.items():
@@ -48,10 +51,12 @@ def mtl_text(materials: dict[str, tuple[float, float, float]],
                 f"Kd {r:.6f} {g:.6f} {b:.6f}", "Ks 0.000000 0.000000 0.000000",
                 "Ns 10.000000", "d 1.000000", "illum 1"]
         if name in maps:
-            path, cutout = maps[name]
-            out.append(f"map_Kd {path}")
-            if cutout:
-                out.append(f"map_d {path}")
+            tex = maps[name]
+            out.append(f"map_Kd {tex.path}")
+            if tex.cutout:
+                out.append(f"map_d {tex.path}")
+            if tex.normal is not None:
+                out += [f"norm {tex.normal}", f"map_Bump {tex.normal}"]
     return "\n".join(out) + "\n"
 
 
@@ -73,7 +78,7 @@ def _block(name: str, mesh: TreeMesh, offset: int) -> _Block:
         if len(part.faces) == 0:
             continue
         idx = np.repeat(part.faces + offset + 1, 3, axis=1)
-        faces.append(f"usemtl {part.material}\n" + _lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", idx))
+        faces.append(f"usemtl {part.shader}\n" + _lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", idx))
     return _Block(name, mesh, vt, "".join(faces), mesh.n_vertices)
 
 
@@ -89,7 +94,7 @@ def frame_digits(frames: int) -> int:
 
 def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
                stride: int = 1, progress: Callable[[int, int], None] | None = None,
-               frame_start: int = 1, maps: dict[str, tuple[str, bool]] | None = None
+               frame_start: int = 1, maps: dict[str, TextureMap] | None = None
                ) -> ObjResult:
     """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th
     frame, NNNN = frame_start + the bake's frame index; `maps`: textures
@@ -102,7 +107,7 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
     offset = 0
     for tree, mesh in zip(bake.trees, meshes):
         for part in mesh.parts:
-            materials.setdefault(part.material, part.colour)
+            materials.setdefault(part.shader, part.colour)
         blocks.append(_block(_safe(tree.name), mesh, offset))
         offset += mesh.n_vertices
     objects = []

@@ -37,22 +37,42 @@ STYLES = {1: "broadleaf", 2: "needles", 3: "leaflets", 4: "broadleaf"}
 @dataclass(frozen=True)
 class Texture:
     """A texture: file name (`bark.png`), PNG bytes, whether it repeats
-    (bark) or is clamped (cards), whether its alpha is a cutout mask."""
+    (bark) or is clamped (cards), whether its alpha is a cutout mask,
+    whether its pixels are linear data (a normal map) rather than sRGB
+    colour, and its tangent-space normal map (bark), if any."""
 
     name: str
     png: bytes
     repeat: bool
     cutout: bool
+    linear: bool = False
+    normal: Texture | None = None
 
 
-def texture_for(material: str) -> Texture | None:
-    """The texture of a mesh material ("bark", "leaf", "leaf2", ...), or
-    None for materials that stay plain (projectiles)."""
+@dataclass(frozen=True)
+class TextureMap:
+    """What a file-based format (OBJ's .mtl, USD) references for a
+    material: the colour PNG's path relative to the file, whether its alpha
+    is a cutout, and the normal map's path (None: no normal map)."""
+
+    path: str
+    cutout: bool
+    normal: str | None = None
+
+
+def texture_for(material: str, detail: str = "default") -> Texture | None:
+    """The texture of a mesh material ("bark", "bark_oak", "leaf", "leaf2",
+    ...) at a detail level (bark.SCALE: the species' bark textures' size),
+    or None for materials that stay plain (projectiles)."""
     if material == "bark":
         return bark_texture()
+    if material.startswith("bark_"):
+        from .bark import species_bark
+
+        return species_bark(material.removeprefix("bark_"), detail)
     if material.startswith("leaf"):
         kind = int(material[4:] or 1)
-        return leaf_texture(kind)
+        return leaf_texture(kind, "far" if detail == "far" else "default")
     return None
 
 
@@ -129,7 +149,13 @@ def bark_texture() -> Texture:
                                 np.maximum(shade - mid, 0)[..., None]) // mid
     rgb = np.where(shade[..., None] < mid, lo, hi)
     image = Image.fromarray(np.flipud(rgb).astype(np.uint8), "RGB")  # v = 0 at the bottom
-    return Texture("bark.png", _png(image), repeat=True, cutout=False)
+    from .bark import normal_map
+
+    # the relief: the plates' shade, 6 texels deep (rows = v up, like rgb)
+    normal = Texture("bark_normal.png", _png(Image.fromarray(np.flipud(normal_map(shade, 6.0, 1.0)),
+                                                             "RGB")),
+                     repeat=True, cutout=False, linear=True)
+    return Texture("bark.png", _png(image), repeat=True, cutout=False, normal=normal)
 
 
 # ---------------------------------------------------------------------------
@@ -260,9 +286,16 @@ def _atlas(kind: int) -> Image.Image:
 
 
 @cache
-def leaf_texture(kind: int) -> Texture:
+def leaf_texture(kind: int, detail: str = "default") -> Texture:
     """Leaf cards of leaf type `kind` (1 broadleaf, 2 conifer needles, 3 palm
     leaflets, 4 autumn broadleaf), an atlas of ATLAS x ATLAS colour
-    variants (_atlas): colour where the leaves are, alpha 0 elsewhere."""
+    variants (_atlas): colour where the leaves are, alpha 0 elsewhere.
+    detail "far": the same atlas box-reduced to half the texels, its
+    alpha cut at 128 again (a clean mask)."""
     name = "leaf.png" if kind == 1 else f"leaf{kind}.png"
-    return Texture(name, _png(_atlas(kind)), repeat=False, cutout=True)
+    atlas = _atlas(kind)
+    if detail == "far":
+        rgba = np.asarray(atlas.reduce(2)).copy()
+        rgba[..., 3] = np.where(rgba[..., 3] >= 128, 255, 0)
+        atlas = Image.fromarray(rgba, "RGBA")
+    return Texture(name, _png(atlas), repeat=False, cutout=True)

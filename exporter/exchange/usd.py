@@ -33,6 +33,7 @@ from ..rotations import continuous, qnormalize
 from .anim import local_transforms
 from .axes import points_y_up, quats_y_up
 from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh
+from .textures import TextureMap
 
 
 MISSING = "USD export needs the optional dependency usd-core: pip install 'treebake[usd]'"
@@ -76,7 +77,7 @@ def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
 
 class _Writer:
     def __init__(self, bake: Bake, name: str, frame_start: int = 1,
-                 maps: dict[str, tuple[str, bool]] | None = None,
+                 maps: dict[str, TextureMap] | None = None,
                  kind: str = "assembly") -> None:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
         self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
@@ -98,7 +99,7 @@ class _Writer:
         st.SetDefaultPrim(root.GetPrim())
         Usd.ModelAPI(root.GetPrim()).SetKind(kind)
         self.materials: dict[str, object] = {}
-        self.maps = maps or {}  # material -> (texture path relative to the file, cutout)
+        self.maps = maps or {}  # material -> its textures' paths relative to the file
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
         self.subframe_codes = 0  # fractional time codes written, summed over skeletons
 
@@ -122,7 +123,7 @@ class _Writer:
             sh.CreateIdAttr("UsdPreviewSurface")
             diffuse = sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f)
             if name in self.maps:
-                self.texture(path, sh, diffuse, *self.maps[name])
+                self.texture(path, sh, diffuse, self.maps[name])
             else:
                 diffuse.Set(self.Gf.Vec3f(*[float(c) for c in colour]))
             sh.CreateInput("roughness", self.Sdf.ValueTypeNames.Float).Set(0.9)
@@ -131,27 +132,42 @@ class _Writer:
             self.materials[name] = mat
         return self.materials[name]
 
-    def texture(self, path: str, surface, diffuse, file: str, cutout: bool) -> None:
+    def texture(self, path: str, surface, diffuse, maps: TextureMap) -> None:
         """diffuseColor (and for cutout cards opacity, thresholded at 0.5)
-        from a UsdUVTexture reading `file` at the mesh's `st` primvar."""
+        from a UsdUVTexture reading `maps.path` at the mesh's `st` primvar;
+        with a normal map, `normal` from a second UsdUVTexture reading it as
+        raw data, scale 2 and bias -1 (tangent space, -1..1)."""
         Sdf, UsdShade = self.Sdf, self.UsdShade
         reader = UsdShade.Shader.Define(self.stage, f"{path}/stReader")
         reader.CreateIdAttr("UsdPrimvarReader_float2")
         reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-        tex = UsdShade.Shader.Define(self.stage, f"{path}/Texture")
-        tex.CreateIdAttr("UsdUVTexture")
-        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
-        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
-        wrap = "clamp" if cutout else "repeat"
-        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
-        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
-        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-            reader.ConnectableAPI(), "result")
+        cutout = maps.cutout
+        tex = self.uv_texture(f"{path}/Texture", maps.path, "sRGB", cutout, reader)
         diffuse.ConnectToSource(tex.ConnectableAPI(), "rgb")
+        if maps.normal is not None:
+            nrm = self.uv_texture(f"{path}/NormalTexture", maps.normal, "raw", cutout, reader)
+            nrm.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(2, 2, 2, 1))
+            nrm.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(-1, -1, -1, 0))
+            surface.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
+                nrm.ConnectableAPI(), "rgb")
         if cutout:
             surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
                 tex.ConnectableAPI(), "a")
             surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+
+    def uv_texture(self, path: str, file: str, colour_space: str, clamp: bool, reader):
+        """A UsdUVTexture at `path` reading `file` at the reader's `st`."""
+        Sdf = self.Sdf
+        tex = self.UsdShade.Shader.Define(self.stage, path)
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(colour_space)
+        wrap = "clamp" if clamp else "repeat"
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+            reader.ConnectableAPI(), "result")
+        return tex
 
     def meshes(self, parent: str, mesh: TreeMesh, skel_path: str | None,
                offset: np.ndarray | None = None) -> None:
@@ -181,7 +197,7 @@ class _Writer:
                 "st", self.Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
             st.Set(Vt.Vec2fArray.FromNumpy(mesh.uvs[used].astype(np.float32)))
             self.UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(
-                self.material(part.material, part.colour))
+                self.material(part.shader, part.colour))
             if skel_path is not None:
                 b = self.UsdSkel.BindingAPI.Apply(m.GetPrim())
                 b.CreateSkeletonRel().SetTargets([self.Sdf.Path(skel_path)])
@@ -325,11 +341,11 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
                ascii: bool = False, check: bool = True,
                progress: Callable[[int, int], None] | None = None,
                frame_start: int = 1,
-               maps: dict[str, tuple[str, bool]] | None = None,
+               maps: dict[str, TextureMap] | None = None,
                layers: str = "one") -> UsdResult:
     """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
-    frame f at time code frame_start + f; `maps`: material -> (texture
-    path relative to the file, cutout) for the preview surfaces.
+    frame f at time code frame_start + f; `maps`: material -> its
+    TextureMap (paths relative to the file) for the preview surfaces.
     `layers`: "one", the whole shot in that file; "tree", that file is a
     root stage whose trees are payloads, one layer per tree in
     `out/name.trees/` (a DCC opens the stage at once and loads trees on
@@ -341,7 +357,8 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
     result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
     folder = f"{name}.trees"
     # a tree layer sits one folder down: its texture paths climb out of it
-    up = {m: (f"../{path}", cutout) for m, (path, cutout) in (maps or {}).items()}
+    up = {m: TextureMap(f"../{t.path}", t.cutout, None if t.normal is None else f"../{t.normal}")
+          for m, t in (maps or {}).items()}
     checked = _layers_checked(len(meshes)) if check else set()
     for i, mesh in enumerate(meshes):
         if layers == "one":
