@@ -53,3 +53,21 @@ def need(module: str):
         if REQUIRE_TOOLS:
             pytest.fail(f"{module} is needed (TREEBAKE_REQUIRE_TOOLS=1)")
         pytest.skip(f"{module} is an optional dependency")
+
+
+@pytest.fixture
+def engine_calls(monkeypatch):
+    """Every SceneLoads.forces call a bake makes: (t, force (B, 3) N)
+    (test_flows.py, test_keyed_forces.py)."""
+    from treebake.sim.loads import SceneLoads
+
+    calls = []
+    forces = SceneLoads.forces
+
+    def spy(self, t, com, vel, axis, props, *args, **kw):
+        out = forces(self, t, com, vel, axis, props, *args, **kw)
+        calls.append((t, out.copy()))
+        return out
+
+    monkeypatch.setattr(SceneLoads, "forces", spy)
+    return calls

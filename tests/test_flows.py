@@ -76,21 +76,6 @@ def rotor_air(t):
     return peak * n * math.exp(1 - n) * d / r
 
 
-@pytest.fixture
-def engine_calls(monkeypatch):
-    """Every SceneLoads.forces call a bake makes: (t, force (B, 3) N)."""
-    calls = []
-    forces = SceneLoads.forces
-
-    def spy(self, t, com, vel, axis, props, *args, **kw):
-        out = forces(self, t, com, vel, axis, props, *args, **kw)
-        calls.append((t, out.copy()))
-        return out
-
-    monkeypatch.setattr(SceneLoads, "forces", spy)
-    return calls
-
-
 ENGINES = pytest.mark.parametrize(
     "solver, quality", [("planar", "draft"), ("full", "draft"),
                         ("planar", {"base": "draft", "tier": "pymunk"})],

@@ -52,21 +52,6 @@ def scene_with(wind, root, duration=5.0):
                         "duration": duration, "wind": wind}, file="<keys>")
 
 
-@pytest.fixture
-def engine_calls(monkeypatch):
-    """Every SceneLoads.forces call a bake makes: (t, force (B, 3) N)."""
-    calls = []
-    forces = SceneLoads.forces
-
-    def spy(self, t, com, vel, axis, props, *args, **kw):
-        out = forces(self, t, com, vel, axis, props, *args, **kw)
-        calls.append((t, out.copy()))
-        return out
-
-    monkeypatch.setattr(SceneLoads, "forces", spy)
-    return calls
-
-
 @pytest.mark.parametrize("solver, quality", [("planar", "draft"), ("full", "draft"),
                                              ("planar", {"base": "draft", "tier": "pymunk"})],
                          ids=["linear tier", "reference", "pymunk tier"])
