@@ -84,8 +84,11 @@ def srgb8(linear) -> np.ndarray:
 
 
 def _png(image: Image.Image) -> bytes:
+    """The image as PNG bytes (the same bytes for the same image). zlib
+    level 6, not 9: a quarter of the time for 2 % more bytes (the forest's
+    18 textures: 0.41 against 1.66 CPU s, 1.66 against 1.63 MB)."""
     buf = io.BytesIO()
-    image.save(buf, format="PNG", optimize=False, compress_level=9)
+    image.save(buf, format="PNG", optimize=False, compress_level=6)
     return buf.getvalue()
 
 
