@@ -147,6 +147,11 @@ class StoredTrees(Sequence[TreeBake]):
     def __len__(self) -> int:
         return self._count
 
+    @property
+    def path(self) -> Path:
+        """The bake file the trees are read from."""
+        return self._path
+
     def __getitem__(self, i):
         if isinstance(i, slice):
             return [self[k] for k in range(*i.indices(self._count))]

@@ -180,8 +180,10 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]
             if exports:
+                # one process per job, as its bake: the batch runs the jobs side by side
                 report = export_bake(bake, root, job.name,
-                                     ExportOptions(formats=tuple(exports)), bake_path=bake_path)
+                                     ExportOptions(formats=tuple(exports), workers=1),
+                                     bake_path=bake_path)
                 files += report.files
             records = sorted((file_record(folder, p) for p in set(files)),
                              key=lambda r: r["path"])

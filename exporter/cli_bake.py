@@ -152,7 +152,7 @@ def export_options(args, allow_none: bool = False):
         split=args.split, obj_stride=args.stride, preview_size=args.size,
         frame_start=args.frame_start, textures=not args.no_textures,
         trees_per_file=args.trees_per_file, usd_layers=args.usd_layers,
-        **parse_detail(args.detail))
+        workers=getattr(args, "workers", None), **parse_detail(args.detail))
 
 
 def run_export(bake, bake_path, out, name, opts, args):

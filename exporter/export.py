@@ -9,7 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -19,10 +19,9 @@ from .bake_file import StoredTrees, check_finite, tree_field, tree_info
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.textures import TextureMap
-from .exchange.bark import bark_material
-from .exchange.mesh import (DETAIL, MeshOptions, TreeMesh, broken_joints, detail_options,
-                            part_materials_of, tree_mesh)
+from .exchange.mesh import DETAIL, MeshOptions, TreeMesh, part_materials_of
 from .fileio import atomic_path, write_bytes, write_text
+from .tree_meshes import TreeFacts, TreeMeshes
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
 MAX_FRAME_START = 1_000_000
@@ -45,7 +44,8 @@ class ExportOptions:
     the level (mesh.DETAIL: hero, default, far) of every tree's bark tubes,
     foliage cards and textures, `detail_trees` ((tree name, level), ...)
     overriding it per tree (geometry only: textures follow `detail`).
-    Export-time only: the bake does not depend on it."""
+    Export-time only: the bake does not depend on it. workers: processes
+    writing a stored bake's USD tree layers (usd_pool.py; same bytes)."""
 
     formats: tuple[str, ...] = ("glb",)
     mesh: MeshOptions = field(default_factory=MeshOptions)
@@ -59,6 +59,10 @@ class ExportOptions:
     usd_layers: str = "auto"  # "one" file, a layer per "tree", or "auto"
     detail: str = "default"  # mesh.DETAIL level
     detail_trees: tuple[tuple[str, str], ...] = ()  # (tree name, level) overrides
+    # processes writing USD tree layers (None: the cores; the CLI's default). 1 by
+    # default: more start fresh interpreters (spawn), which import a calling
+    # script's __main__, so a script asks for them under `if __name__ == ...`
+    workers: int | None = 1
 
 
 # a shot of more trees is written as glTF files of this many trees and as a
@@ -126,6 +130,8 @@ def check_options(opts: ExportOptions) -> None:
         raise InputError(f"--trees-per-file must be >= 1, got {opts.trees_per_file}")
     if opts.usd_layers not in ("auto", "one", "tree"):
         raise InputError(f"--usd-layers must be auto, one or tree, got {opts.usd_layers!r}")
+    if opts.workers is not None and not 1 <= opts.workers <= 256:
+        raise InputError(f"--workers must be in 1..256, got {opts.workers}")
     for tree, level in (("", opts.detail), *opts.detail_trees):
         if level not in DETAIL:
             raise InputError(f"--detail {tree + '=' if tree else ''}{level!r}: the level must "
@@ -160,82 +166,6 @@ def sha256(path: Path) -> str:
 
 # the manifest's first keys, in this order; the writers' own follow
 _MANIFEST_ORDER = ("tool", "job", "inputs", "settings", "frames", "sizes")
-
-
-@dataclass(frozen=True)
-class TreeFacts:
-    """What the manifest says of one tree, noted when its mesh is built."""
-
-    inputs: dict  # name, grammar, its hash, seed, segments, static
-    segments: int
-    static: bool
-    extra_samples: int
-    leaf_quads: int
-    vertices: int
-    triangles: int
-    broken_joints: int
-
-
-class TreeMeshes(Sequence[TreeMesh]):
-    """Every tree's mesh (exchange.mesh.tree_mesh), built when a writer asks
-    for it (the last one kept), so an export holds one tree's mesh, not the
-    shot's; what the manifest says of each tree is noted as it is built."""
-
-    def __init__(self, bake: Bake, opts: MeshOptions, detail: str = "default",
-                 detail_trees: tuple[tuple[str, str], ...] = (), species: bool = False):
-        self.bake, self.opts = bake, opts
-        self.detail, self.detail_trees = detail, dict(detail_trees)
-        self.species = species  # bark materials per species (bark.bark_material)
-        self.facts: dict[int, TreeFacts] = {}
-        self._last: tuple[int, TreeMesh] | None = None
-
-    def __len__(self) -> int:
-        return len(self.bake.trees)
-
-    def __getitem__(self, i):
-        if isinstance(i, slice):
-            return [self[k] for k in range(*i.indices(len(self)))]
-        i = range(len(self))[i]
-        if self._last is None or self._last[0] != i:
-            tree = self.bake.trees[i]
-            broken = broken_joints(tree)
-            mesh = tree_mesh(tree, self.tree_options(i), broken)
-            self.facts[i] = TreeFacts(
-                {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
-                 "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
-                 "segments": tree.n_segments, "static": tree.static},
-                tree.n_segments, tree.static, len(tree.extra_times),
-                sum(len(p.faces) // 2 for p in mesh.parts if p.material.startswith("leaf")),
-                mesh.n_vertices, mesh.n_triangles, int(broken.sum()))
-            self._last = (i, mesh)
-        return self._last[1]
-
-    def tree_options(self, i: int) -> MeshOptions:
-        """Tree i's mesh options: its detail level, its species' bark."""
-        info = tree_info(self.bake.trees, i)
-        name = str(info.get("name"))
-        bark = bark_material(info.get("grammar")) if self.species else self.opts.bark
-        return detail_options(self.opts, self.detail_trees.get(name, self.detail), bark)
-
-    def __iter__(self) -> Iterator[TreeMesh]:
-        for i in range(len(self)):
-            yield self[i]
-
-    def all_facts(self) -> list[TreeFacts]:
-        """Every tree's facts, in order (building the meshes no writer
-        asked for)."""
-        for i in range(len(self)):
-            if i not in self.facts:
-                self[i]
-        return [self.facts[i] for i in range(len(self))]
-
-
-def build_meshes(bake: Bake, opts: MeshOptions) -> tuple[list[TreeMesh], int]:
-    """Every tree's mesh at once, and how many joints broke (split in the
-    mesh): for scripts and checks; exports build them one at a time."""
-    meshes = TreeMeshes(bake, opts)
-    built = list(meshes)
-    return built, sum(f.broken_joints for f in meshes.all_facts())
 
 
 def _inputs(bake: Bake, bake_path: Path | None, facts: list[TreeFacts]) -> dict:
@@ -447,7 +377,8 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
                 layers = "tree" if len(job.bake.trees) > USD_LAYER_TREES else "one"
             res = export_usd(job.bake, job.meshes, job.folder, job.name, ascii=fmt == "usda",
                              progress=lambda d, t, f=fmt: job.tick(f, d, t),
-                             frame_start=job.first, maps=job.maps, layers=layers)
+                             frame_start=job.first, maps=job.maps, layers=layers,
+                             write_layers=_layer_pool(job) if layers == "tree" else None)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))
@@ -458,6 +389,21 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
                                "validation_errors": 0, "up_axis": "Y", "meters_per_unit": 1.0,
                                "layers": layers, "tree_layers_validated": res.layers_checked}
     return files
+
+
+def _layer_pool(job: _Job):
+    """Worker processes for the USD tree layers (usd_pool.py) when the bake
+    is stored (each worker opens it) and the shot has trees for more than
+    one; else None (this process writes them)."""
+    from .usd_pool import MeshSource, layer_writer, workers_for
+
+    trees = job.bake.trees
+    workers = workers_for(len(trees), job.opts.workers)
+    if not isinstance(trees, StoredTrees) or workers < 2:
+        return None
+    m = job.meshes
+    source = MeshSource(trees.path, m.opts, m.detail, tuple(m.detail_trees.items()), m.species)
+    return layer_writer(source, workers, m.facts)
 
 
 def _write_abc(job: _Job, manifest: dict) -> list[Path]:

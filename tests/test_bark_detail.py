@@ -20,7 +20,8 @@ from gltfread import Gltf
 from treebake.cli import main
 from treebake.exchange import bark, textures
 from treebake.exchange.mesh import MeshOptions, tree_mesh
-from treebake.export import ExportOptions, TreeMeshes, export_bake
+from treebake.export import ExportOptions, export_bake
+from treebake.tree_meshes import TreeMeshes
 
 SPECIES = sorted(bark.STYLES)
 

@@ -130,7 +130,7 @@ def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_pa
 
     import blender
     from treebake.exchange.mesh import pose
-    from treebake.export import build_meshes
+    from treebake.tree_meshes import build_meshes
 
     pytest.importorskip("alembic3d", reason="alembic3d (treebake[alembic]) writes the .abc")
     bake = preset_bake("demo", duration)

@@ -180,7 +180,7 @@ def test_point_cache_is_the_posed_mesh_of_every_frame(alembic, tmp_path):
 
 def report_meshes(bake):
     from treebake.exchange.mesh import MeshOptions
-    from treebake.export import build_meshes
+    from treebake.tree_meshes import build_meshes
 
     return build_meshes(bake, MeshOptions())[0]
 

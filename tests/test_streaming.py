@@ -187,6 +187,40 @@ def test_a_usd_of_many_trees_is_a_root_stage_of_payloads_with_the_same_motion(
         f"MissingPayload: /many/{layers[3].stem}: ./many.trees/{layers[3].name} not found"]
 
 
+def test_usd_tree_layers_written_by_worker_processes_are_the_same_bytes(streamed, tmp_path,
+                                                                       monkeypatch):
+    """Two worker processes (usd_pool.py) write the tree layers, each from
+    its own lazy read of the bake: every file, the manifest (with each
+    tree's facts, noted in the workers) included, is the bytes one process
+    writes."""
+    pytest.importorskip("pxr")  # TREEBAKE_REQUIRE_TOOLS: see conftest
+    from treebake import usd_pool
+    from treebake.export import ExportOptions, export_bake
+
+    monkeypatch.setattr(usd_pool, "MIN_TREES_PER_WORKER", 20)  # 91 trees: two workers
+    pools = []
+    real = usd_pool.layer_writer
+
+    def spy(source, workers, facts):
+        pools.append(workers)
+        return real(source, workers, facts)
+
+    monkeypatch.setattr(usd_pool, "layer_writer", spy)
+    path, _, _ = streamed
+    for workers, name in ((1, "serial"), (2, "pool")):
+        export_bake(load_bake(path, lazy=True), tmp_path, "shot",
+                    ExportOptions(formats=("usd",), usd_layers="tree", workers=workers))
+        (tmp_path / "shot").rename(tmp_path / name)
+    assert pools == [2]  # the serial export made no pool
+    files = sorted(p.relative_to(tmp_path / "serial") for p in (tmp_path / "serial").rglob("*")
+                   if p.is_file())
+    assert len(files) > 90
+    assert files == sorted(p.relative_to(tmp_path / "pool") for p in
+                           (tmp_path / "pool").rglob("*") if p.is_file())
+    for f in files:
+        assert (tmp_path / "serial" / f).read_bytes() == (tmp_path / "pool" / f).read_bytes(), f
+
+
 def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(streamed, tmp_path):
     from treebake.exchange.gltf_read import read_gltf_bake
     from treebake.export import ExportOptions, export_bake

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..bake import Bake
+from ..bake_file import tree_info
 from ..errors import InputError, TreebakeError
 from ..fileio import write_bytes
 from ..names import joint_names
@@ -337,44 +338,88 @@ def _missing_payloads(stage, folder: Path) -> list[str]:
     return out
 
 
+@dataclass(frozen=True)
+class LayerTask:
+    """One tree's payload layer to write: tree `index`, its prim's name
+    under the root, whether the layer is validated on its own."""
+
+    index: int
+    prim: str
+    check: bool
+
+
+@dataclass
+class TreeLayer:
+    """A tree's payload layer as written: its file, the joints written,
+    sub-frame time codes, validation errors ("file: name: message")."""
+
+    file: Path
+    joints: int
+    subframe_codes: int
+    errors: list[str]
+
+
+@dataclass(frozen=True)
+class LayerSpec:
+    """Where and how tree layers are written: `out`/`name`.trees/, the
+    extension (.usd or .usda), the first frame's number, the textures
+    (paths relative to a tree layer)."""
+
+    out: Path
+    name: str
+    ext: str
+    frame_start: int
+    maps: dict
+
+    @property
+    def folder(self) -> str:
+        return f"{self.name}.trees"
+
+
+def write_tree_layer(bake: Bake, mesh: TreeMesh, task: LayerTask, spec: LayerSpec) -> TreeLayer:
+    """Tree task.index of `bake` with its `mesh` as a component layer of its
+    own (out/name.trees/PRIM.usd), validated if the task says so. Depends
+    only on the tree: any process writes the same bytes."""
+    tw = _Writer(bake, task.prim, spec.frame_start, spec.maps, kind="component")
+    joints = tw.tree(task.index, mesh, tw.root)
+    layer = spec.out / spec.folder / f"{task.prim}{spec.ext}"
+    written = write_bytes(layer, tw.save(layer))
+    errors = [f"{layer.name}: {e}" for e in validate(layer)] if task.check else []
+    return TreeLayer(written, joints, tw.subframe_codes, errors)
+
+
+LayerWriter = Callable[[list[LayerTask], LayerSpec], Iterable[TreeLayer]]
+
+
 def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: str,
                ascii: bool = False, check: bool = True,
                progress: Callable[[int, int], None] | None = None,
                frame_start: int = 1,
                maps: dict[str, TextureMap] | None = None,
-               layers: str = "one") -> UsdResult:
+               layers: str = "one", write_layers: LayerWriter | None = None) -> UsdResult:
     """Write `out/name.usd` (binary crate) or `out/name.usda` (text); bake
     frame f at time code frame_start + f; `maps`: material -> its
     TextureMap (paths relative to the file) for the preview surfaces.
     `layers`: "one", the whole shot in that file; "tree", that file is a
     root stage whose trees are payloads, one layer per tree in
     `out/name.trees/` (a DCC opens the stage at once and loads trees on
-    demand; memory follows one tree)."""
+    demand; memory follows one tree), written in this process or by
+    `write_layers(tasks, spec)`, which yields their TreeLayers in the
+    tasks' order (worker processes: usd_pool.py): the same bytes."""
     if layers not in ("one", "tree"):
         raise ValueError(f"layers must be 'one' or 'tree', got {layers!r}")
     ext = ".usda" if ascii else ".usd"
     w = _Writer(bake, name, frame_start, maps)
     result = UsdResult(time_codes=(float(frame_start), float(frame_start + len(bake.times) - 1)))
-    folder = f"{name}.trees"
-    # a tree layer sits one folder down: its texture paths climb out of it
-    up = {m: TextureMap(f"../{t.path}", t.cutout, None if t.normal is None else f"../{t.normal}")
-          for m, t in (maps or {}).items()}
-    checked = _layers_checked(len(meshes)) if check else set()
-    for i, mesh in enumerate(meshes):
-        if layers == "one":
+    if layers == "one":
+        for i, mesh in enumerate(meshes):
             result.joints += w.tree(i, mesh)
-        else:
-            prim = w.unique(w.root, bake.trees[i].name)
-            tw = _Writer(bake, prim.rsplit("/", 1)[1], frame_start, up, kind="component")
-            result.joints += tw.tree(i, mesh, tw.root)
-            result.subframe_codes += tw.subframe_codes
-            layer = Path(out) / folder / f"{prim.rsplit('/', 1)[1]}{ext}"
-            result.files.append(write_bytes(layer, tw.save(layer)))
-            if i in checked:
-                result.validation_errors += [f"{layer.name}: {e}" for e in validate(layer)]
-            w.stage.DefinePrim(prim).GetPayloads().AddPayload(f"./{folder}/{layer.name}")
-        if progress is not None:
-            progress(i + 1, len(meshes))
+            if progress is not None:
+                progress(i + 1, len(meshes))
+    else:
+        checked = _layers_checked(len(meshes)) if check else set()
+        _tree_layers(w, bake, meshes, checked, write_layers, progress, result,
+                     LayerSpec(Path(out), name, ext, frame_start, _from_subfolder(maps)))
     w.objects()
     result.subframe_codes += w.subframe_codes
     path = Path(out) / f"{name}{ext}"
@@ -383,6 +428,33 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
         result.validation_errors += validate(path, load=layers == "one")
         result.layers_checked = len(checked) if layers == "tree" else 0
     return result
+
+
+def _from_subfolder(maps: dict[str, TextureMap] | None) -> dict[str, TextureMap]:
+    """Texture paths for a tree layer, one folder down: they climb out of it."""
+    return {m: TextureMap(f"../{t.path}", t.cutout, None if t.normal is None else f"../{t.normal}")
+            for m, t in (maps or {}).items()}
+
+
+def _tree_layers(w: _Writer, bake: Bake, meshes: Sequence[TreeMesh], checked: set[int],
+                 write_layers: LayerWriter | None, progress, result: UsdResult,
+                 spec: LayerSpec) -> None:
+    """Every tree's payload layer written (here or by `write_layers`) and
+    added to the root stage of `w` as a payload, in the trees' order."""
+    prims = [w.unique(w.root, tree_info(bake.trees, i)["name"]) for i in range(len(meshes))]
+    tasks = [LayerTask(i, prim.rsplit("/", 1)[1], i in checked) for i, prim in enumerate(prims)]
+    if write_layers is None:
+        written = (write_tree_layer(bake, meshes[t.index], t, spec) for t in tasks)
+    else:
+        written = write_layers(tasks, spec)
+    for k, (prim, layer) in enumerate(zip(prims, written, strict=True), 1):
+        result.joints += layer.joints
+        result.subframe_codes += layer.subframe_codes
+        result.files.append(layer.file)
+        result.validation_errors += layer.errors
+        w.stage.DefinePrim(prim).GetPayloads().AddPayload(f"./{spec.folder}/{layer.file.name}")
+        if progress is not None:
+            progress(k, len(meshes))
 
 
 LAYERS_CHECKED = 20  # tree layers validated on their own, at most, spread over the shot
