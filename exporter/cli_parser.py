@@ -208,8 +208,9 @@ COMMANDS: tuple[Command, ...] = (
          opt("--format", default="glb",
              help="comma-separated: glb, gltf, obj, usd, usda, abc, preview (default: glb)"),
          opt("--workers", type=int, default=None,
-             help="processes writing USD tree layers (default: the machine's cores, one per "
-                  "50 trees at most; the files are the same with any number)"),
+             help="processes writing USD tree layers and glTF files of many trees (default: "
+                  "the machine's cores, one per 50 trees at most; the files are the same with "
+                  "any number)"),
          OUT, JOB_NAME, EXPORT_OPTIONS, json_option("print the summary as JSON"), QUIET)),
     Command(
         "preview", cmd_preview, "contact sheet PNG and animated GIF of a bake",

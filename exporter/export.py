@@ -45,7 +45,8 @@ class ExportOptions:
     foliage cards and textures, `detail_trees` ((tree name, level), ...)
     overriding it per tree (geometry only: textures follow `detail`).
     Export-time only: the bake does not depend on it. workers: processes
-    writing a stored bake's USD tree layers (usd_pool.py; same bytes)."""
+    writing a stored bake's USD tree layers and glTF files (export_pool.py;
+    the same bytes)."""
 
     formats: tuple[str, ...] = ("glb",)
     mesh: MeshOptions = field(default_factory=MeshOptions)
@@ -335,9 +336,12 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
             per_file = opts.trees_per_file
             if per_file is None and len(job.bake.trees) > GLTF_TREES_PER_FILE:
                 per_file = GLTF_TREES_PER_FILE
+            files_of = -(-len(job.bake.trees) // per_file) if per_file else 1
             res = export_gltf(job.bake, job.meshes, job.folder, job.name, binary=fmt == "glb",
                               split=opts.split, opts=opts.reduce, frame_start=job.first,
-                              textures=job.textures, trees_per_file=per_file)
+                              textures=job.textures, trees_per_file=per_file,
+                              write_files=_pool(job, "gltf", len(job.bake.trees) if opts.split
+                                                else files_of))
             files += res.files
             manifest["animation"] = _rounded(res.animation)
             manifest["animation"]["tolerances"] = {
@@ -378,7 +382,8 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
             res = export_usd(job.bake, job.meshes, job.folder, job.name, ascii=fmt == "usda",
                              progress=lambda d, t, f=fmt: job.tick(f, d, t),
                              frame_start=job.first, maps=job.maps, layers=layers,
-                             write_layers=_layer_pool(job) if layers == "tree" else None)
+                             write_layers=_pool(job, "usd", len(job.bake.trees))
+                             if layers == "tree" else None)
             if res.validation_errors:
                 raise TreebakeError("USD validation failed:\n  " +
                                     "\n  ".join(res.validation_errors[:20]))
@@ -391,19 +396,20 @@ def _write_usd(job: _Job, manifest: dict) -> list[Path]:
     return files
 
 
-def _layer_pool(job: _Job):
-    """Worker processes for the USD tree layers (usd_pool.py) when the bake
-    is stored (each worker opens it) and the shot has trees for more than
-    one; else None (this process writes them)."""
-    from .usd_pool import MeshSource, layer_writer, workers_for
+def _pool(job: _Job, kind: str, files: int):
+    """Worker processes (export_pool.py) for USD tree layers (`kind`
+    "usd") or glTF files ("gltf") when the bake is stored (each worker
+    opens it) and there is work for more than one: `files` files of the
+    shot's trees; else None (this process writes them)."""
+    from .export_pool import MeshSource, file_writer, layer_writer, workers_for
 
     trees = job.bake.trees
-    workers = workers_for(len(trees), job.opts.workers)
+    workers = min(workers_for(len(trees), job.opts.workers), files)
     if not isinstance(trees, StoredTrees) or workers < 2:
         return None
     m = job.meshes
     source = MeshSource(trees.path, m.opts, m.detail, tuple(m.detail_trees.items()), m.species)
-    return layer_writer(source, workers, m.facts)
+    return (layer_writer if kind == "usd" else file_writer)(source, workers, m.facts)
 
 
 def _write_abc(job: _Job, manifest: dict) -> list[Path]:

@@ -187,34 +187,36 @@ def test_a_usd_of_many_trees_is_a_root_stage_of_payloads_with_the_same_motion(
         f"MissingPayload: /many/{layers[3].stem}: ./many.trees/{layers[3].name} not found"]
 
 
-def test_usd_tree_layers_written_by_worker_processes_are_the_same_bytes(streamed, tmp_path,
-                                                                       monkeypatch):
-    """Two worker processes (usd_pool.py) write the tree layers, each from
-    its own lazy read of the bake: every file, the manifest (with each
-    tree's facts, noted in the workers) included, is the bytes one process
-    writes."""
-    pytest.importorskip("pxr")  # TREEBAKE_REQUIRE_TOOLS: see conftest
-    from treebake import usd_pool
+@pytest.mark.parametrize("fmt", ["usd", "glb"])
+def test_files_written_by_worker_processes_are_the_same_bytes(streamed, tmp_path, monkeypatch,
+                                                              fmt):
+    """Two worker processes (export_pool.py) write the USD tree layers or
+    the glb files of 30 trees, each from its own lazy read of the bake:
+    every file, the manifest (with each tree's facts, noted in the workers)
+    included, is the bytes one process writes."""
+    if fmt == "usd":
+        pytest.importorskip("pxr")  # TREEBAKE_REQUIRE_TOOLS: see conftest
+    from treebake import export_pool
     from treebake.export import ExportOptions, export_bake
 
-    monkeypatch.setattr(usd_pool, "MIN_TREES_PER_WORKER", 20)  # 91 trees: two workers
+    monkeypatch.setattr(export_pool, "MIN_TREES_PER_WORKER", 20)  # 91 trees: two workers
     pools = []
-    real = usd_pool.layer_writer
+    for maker in ("layer_writer", "file_writer"):
+        def spy(source, workers, facts, real=getattr(export_pool, maker), kind=maker):
+            pools.append((kind, workers))
+            return real(source, workers, facts)
 
-    def spy(source, workers, facts):
-        pools.append(workers)
-        return real(source, workers, facts)
-
-    monkeypatch.setattr(usd_pool, "layer_writer", spy)
+        monkeypatch.setattr(export_pool, maker, spy)
     path, _, _ = streamed
+    opts = dict(formats=(fmt,), usd_layers="tree", trees_per_file=30)
     for workers, name in ((1, "serial"), (2, "pool")):
         export_bake(load_bake(path, lazy=True), tmp_path, "shot",
-                    ExportOptions(formats=("usd",), usd_layers="tree", workers=workers))
+                    ExportOptions(**opts, workers=workers))
         (tmp_path / "shot").rename(tmp_path / name)
-    assert pools == [2]  # the serial export made no pool
+    assert pools == [("layer_writer" if fmt == "usd" else "file_writer", 2)]  # serial: none
     files = sorted(p.relative_to(tmp_path / "serial") for p in (tmp_path / "serial").rglob("*")
                    if p.is_file())
-    assert len(files) > 90
+    assert len(files) > (90 if fmt == "usd" else 4)
     assert files == sorted(p.relative_to(tmp_path / "pool") for p in
                            (tmp_path / "pool").rglob("*") if p.is_file())
     for f in files:

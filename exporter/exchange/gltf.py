@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -33,6 +33,7 @@ import numpy as np
 
 from .. import __version__
 from ..bake import FAST_TURN_DEG, Bake
+from ..bake_file import tree_info
 from ..fileio import write_bytes
 from ..names import joint_names
 from .anim import Animation, ReduceOptions, animate, subtree_reach
@@ -448,44 +449,84 @@ def write(path: str | Path, doc: _Document) -> list[Path]:
     return [write_bytes(path, header + chunks)]
 
 
+@dataclass(frozen=True)
+class GltfFile:
+    """One glTF file of an export: its name without extension, the trees in
+    it (indices into the bake), whether it holds the projectiles."""
+
+    stem: str
+    trees: range
+    objects: bool
+
+
+@dataclass(frozen=True)
+class GltfSettings:
+    """How every file of an export is written: where, .glb or .gltf, the
+    keyframe reduction, the first frame's number, the textures to embed."""
+
+    out: Path
+    binary: bool
+    opts: ReduceOptions
+    frame_start: int
+    textures: dict | None
+
+
+@dataclass
+class GltfWritten:
+    """A file as written: its paths (.gltf and .bin, or .glb), its trees'
+    keyframe reports and sub-frame samples."""
+
+    files: list[Path]
+    reports: list[dict]
+    extra_samples: int
+
+
+def write_gltf_file(bake: Bake, meshes: Sequence[TreeMesh], job: GltfFile,
+                    settings: GltfSettings) -> GltfWritten:
+    """Write one file of an export (its trees read into memory while it is
+    written, no more). Depends only on its trees: any process writes the
+    same bytes."""
+    part = replace(bake, trees=[bake.trees[i] for i in job.trees])  # this file's trees, read once
+    doc, parts = build(part, job.stem, [meshes[i] for i in job.trees],
+                       list(range(len(job.trees))), job.objects, settings.opts,
+                       settings.frame_start, settings.textures)
+    ext = ".glb" if settings.binary else ".gltf"
+    files = write(settings.out / f"{job.stem}{ext}", doc)
+    return GltfWritten(files, [p.anim.report for p in parts],
+                       sum(len(t.extra_times) for t in part.trees if not t.static))
+
+
+FileWriter = Callable[[list[GltfFile], GltfSettings], Iterable[GltfWritten]]
+
+
 def export_gltf(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: str,
                 binary: bool = True, split: bool = False,
                 opts: ReduceOptions | None = None, frame_start: int = 1,
                 textures: dict[str, Texture | None] | None = None,
-                trees_per_file: int | None = None) -> GltfResult:
+                trees_per_file: int | None = None,
+                write_files: FileWriter | None = None) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
     `name.<tree>.glb`, and the projectiles in `name.objects.glb`;
     `trees_per_file` N: files of at most N trees, `name.part0001.glb`, ...
     (the projectiles in the first). A file's trees are read into memory
     while it is written, no more. Bake frame f (0-based) is keyed at
     (frame_start + f) / fps s. `textures`: material name -> Texture to
-    embed (textures.py); others stay plain."""
-    out = Path(out)
-    opts = opts or ReduceOptions()
-    ext = ".glb" if binary else ".gltf"
-    count = len(bake.trees)
-    jobs: list[tuple[str, range, bool]]
-    if split:
-        jobs = [(f"{name}.{bake.trees[i].name}", range(i, i + 1), False) for i in range(count)]
-        if bake.objects is not None and len(bake.objects.sizes):
-            jobs.append((f"{name}.objects", range(0), True))
-    elif trees_per_file and count > trees_per_file:
-        starts = range(0, count, trees_per_file)
-        digits = max(4, len(str(len(starts))))
-        jobs = [(f"{name}.part{k + 1:0{digits}d}", range(a, min(a + trees_per_file, count)),
-                 k == 0) for k, a in enumerate(starts)]
+    embed (textures.py); others stay plain. The files are written here or
+    by `write_files(jobs, settings)`, which yields them in the jobs' order
+    (worker processes: export_pool.py): the same bytes."""
+    settings = GltfSettings(Path(out), binary, opts or ReduceOptions(), frame_start, textures)
+    jobs = gltf_files(bake, name, split, trees_per_file)
+    if write_files is None:
+        written = [write_gltf_file(bake, meshes, job, settings) for job in jobs]
     else:
-        jobs = [(name, range(count), True)]
+        written = write_files(jobs, settings)
     result = GltfResult()
     reports = []
     extra = 0
-    for stem, trees, objects in jobs:
-        part = replace(bake, trees=[bake.trees[i] for i in trees])  # this file's trees, read once
-        doc, parts = build(part, stem, [meshes[i] for i in trees], list(range(len(trees))),
-                           objects, opts, frame_start, textures)
-        result.files += write(out / f"{stem}{ext}", doc)
-        reports += [p.anim.report for p in parts]
-        extra += sum(len(t.extra_times) for t in part.trees if not t.static)
+    for w in written:
+        result.files += w.files
+        reports += w.reports
+        extra += w.extra_samples
     result.animation = merge_reports(reports)
     if result.animation:
         result.animation["frames"] = len(bake.times)
@@ -493,6 +534,25 @@ def export_gltf(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: s
         result.animation["subframe_turn_deg"] = FAST_TURN_DEG
         result.animation["errors_at"] = "frames"
     return result
+
+
+def gltf_files(bake: Bake, name: str, split: bool, trees_per_file: int | None) -> list[GltfFile]:
+    """The files an export writes: one per tree (`split`; the projectiles
+    in their own), files of `trees_per_file` trees, or one."""
+    count = len(bake.trees)
+    if split:
+        jobs = [GltfFile(f"{name}.{tree_info(bake.trees, i)['name']}", range(i, i + 1), False)
+                for i in range(count)]
+        if bake.objects is not None and len(bake.objects.sizes):
+            jobs.append(GltfFile(f"{name}.objects", range(0), True))
+        return jobs
+    if trees_per_file and count > trees_per_file:
+        starts = range(0, count, trees_per_file)
+        digits = max(4, len(str(len(starts))))
+        return [GltfFile(f"{name}.part{k + 1:0{digits}d}",
+                         range(a, min(a + trees_per_file, count)), k == 0)
+                for k, a in enumerate(starts)]
+    return [GltfFile(name, range(count), True)]
 
 
 def merge_reports(reports: list[dict]) -> dict:

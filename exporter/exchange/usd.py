@@ -405,7 +405,7 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
     `out/name.trees/` (a DCC opens the stage at once and loads trees on
     demand; memory follows one tree), written in this process or by
     `write_layers(tasks, spec)`, which yields their TreeLayers in the
-    tasks' order (worker processes: usd_pool.py): the same bytes."""
+    tasks' order (worker processes: export_pool.py): the same bytes."""
     if layers not in ("one", "tree"):
         raise ValueError(f"layers must be 'one' or 'tree', got {layers!r}")
     ext = ".usda" if ascii else ".usd"
