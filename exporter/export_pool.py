@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .bake_file import load_bake
-from .exchange.mesh import MeshOptions
 from .exchange.gltf import GltfFile, GltfSettings, GltfWritten, write_gltf_file
+from .exchange.mesh import MeshOptions
 from .exchange.usd import LayerSpec, LayerTask, TreeLayer, write_tree_layer
 from .tree_meshes import TreeFacts, TreeMeshes
 
