@@ -216,7 +216,7 @@ def _textures(bake: Bake, opts: ExportOptions) -> dict:
     alone: no mesh is built)."""
     if not opts.textures:
         return {}
-    from .exchange.textures import texture_for
+    from .exchange.materials import texture_for
 
     names = set()
     meshes = TreeMeshes(bake, opts.mesh, opts.detail, opts.detail_trees, species=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .bake import Bake
 from .bake_file import tree_info
-from .exchange.bark import bark_material
+from .exchange.bark import bark_colour, bark_material
 from .exchange.mesh import MeshOptions, TreeMesh, broken_joints, detail_options, tree_mesh
 
 
@@ -67,7 +67,8 @@ class TreeMeshes(Sequence[TreeMesh]):
         info = tree_info(self.bake.trees, i)
         name = str(info.get("name"))
         bark = bark_material(info.get("grammar")) if self.species else self.opts.bark
-        return detail_options(self.opts, self.detail_trees.get(name, self.detail), bark)
+        rgb = bark_colour(bark) if self.species else self.opts.bark_rgb
+        return detail_options(self.opts, self.detail_trees.get(name, self.detail), bark, rgb)
 
     def __iter__(self) -> Iterator[TreeMesh]:
         for i in range(len(self)):

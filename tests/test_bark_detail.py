@@ -18,7 +18,7 @@ from bakes import preset_bake
 from conftest import need
 from gltfread import Gltf
 from treebake.cli import main
-from treebake.exchange import bark, textures
+from treebake.exchange import bark, materials, textures
 from treebake.exchange.mesh import MeshOptions, tree_mesh
 from treebake.export import ExportOptions, export_bake
 from treebake.tree_meshes import TreeMeshes
@@ -93,7 +93,7 @@ def test_normal_map_of_a_known_relief():
 
 
 def normal_map_float(height, depth, scale):
-    out = bark.normal_map(np.asarray(height, np.int64), depth, scale)
+    out = textures.normal_map(np.asarray(height, np.int64), depth, scale)
     return out.astype(np.float64) / 127.5 - 1
 
 
@@ -127,7 +127,7 @@ def test_glb_bark_materials_carry_normal_maps_and_tangents(calm):
         image = g.g.images[g.g.textures[info.index].source]
         view = g.g.bufferViews[image.bufferView]
         png = g.blob[view.byteOffset:view.byteOffset + view.byteLength]
-        assert png == textures.texture_for(m.name).normal.png
+        assert png == materials.texture_for(m.name).normal.png
     for mesh in g.g.meshes:
         for prim in mesh.primitives:
             mat = g.g.materials[prim.material]
@@ -185,7 +185,7 @@ def test_usd_normal_map_network(calm):
         assert tex.GetInput("bias").Get() == Gf.Vec4f(-1, -1, -1, 0)
         asset = tex.GetInput("file").Get()
         assert Path(asset.resolvedPath).name == f"{name}_normal.png"
-        assert Path(asset.resolvedPath).read_bytes() == textures.texture_for(name).normal.png
+        assert Path(asset.resolvedPath).read_bytes() == materials.texture_for(name).normal.png
         # read at the same st as the colour
         (st,), _ = tex.GetInput("st").GetConnectedSources()
         assert UsdShade.Shader(st.source.GetPrim()).GetIdAttr().Get() == "UsdPrimvarReader_float2"

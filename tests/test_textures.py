@@ -18,7 +18,7 @@ from bakes import preset_bake
 from conftest import need
 from gltfread import Gltf
 from treebake.cli import main
-from treebake.exchange import textures
+from treebake.exchange import materials, textures
 from treebake.exchange.foliage import ATLAS, STYLES
 from treebake.export import ExportOptions, export_bake
 
@@ -58,8 +58,8 @@ def test_textures_are_deterministic_and_well_formed():
         assert np.ptp(means.sum(1)) > 0.1 * means.sum(1).mean()
         hue = means / means.sum(1, keepdims=True)
         assert np.ptp(hue[:, 0]) > 0.02 and np.ptp(hue[:, 2]) > 0.02
-    assert textures.texture_for("leaf2").name == "leaf2.png"  # conifers: needle cards
-    assert textures.texture_for("object") is None
+    assert materials.texture_for("leaf2").name == "leaf2.png"  # conifers: needle cards
+    assert materials.texture_for("object") is None
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def test_glb_embeds_the_textures(demo):
         assert image.mimeType == "image/png"
         view = g.g.bufferViews[image.bufferView]
         png = g.blob[view.byteOffset:view.byteOffset + view.byteLength]
-        assert png == textures.texture_for(name).png
+        assert png == materials.texture_for(name).png
         if name.startswith("leaf"):
             assert m.alphaMode == "MASK" and m.alphaCutoff == 0.5 and m.doubleSided
     assert tex.manifest["settings"]["textures"] is True

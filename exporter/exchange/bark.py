@@ -30,7 +30,7 @@ from pathlib import PurePosixPath
 import numpy as np
 from PIL import Image
 
-from .textures import BARK_SIZE, SEED, Texture, _fractal, _png, srgb8
+from .textures import BARK_SIZE, SEED, Texture, _fractal, _png, normal_map, srgb8
 
 # detail level -> texels per default texel (bark textures: 128x256, 256x512, 512x1024)
 SCALE = {"far": 0.5, "default": 1.0, "hero": 2.0}
@@ -171,19 +171,6 @@ def _colour(shade: np.ndarray, dark, base, light) -> np.ndarray:
     lo = d + ((b - d) * np.minimum(shade, mid)[..., None]) // mid
     hi = b + ((li - b) * np.maximum(shade - mid, 0)[..., None]) // mid
     return np.where(shade[..., None] < mid, lo, hi)
-
-
-def normal_map(height: np.ndarray, depth: float, scale: float) -> np.ndarray:
-    """(h, w, 3) uint8 tangent-space normals of a periodic height field
-    (0..65535 = `depth` default texels of relief; rows = v up; `scale`
-    texels per default texel): central differences that wrap, so the map
-    tiles."""
-    z = height.astype(np.float64) * (depth / 65535.0)
-    du = (np.roll(z, -1, axis=1) - np.roll(z, 1, axis=1)) * (0.5 * scale)
-    dv = (np.roll(z, -1, axis=0) - np.roll(z, 1, axis=0)) * (0.5 * scale)
-    n = np.stack([-du, -dv, np.ones_like(z)], axis=-1)
-    n = n / np.sqrt((n * n).sum(-1, keepdims=True))
-    return np.floor((n + 1.0) * 127.5 + 0.5).astype(np.uint8)
 
 
 @cache

@@ -32,12 +32,6 @@ from ..rotations import apply, cross, matrices_from_quaternions
 from .foliage import cards
 
 
-def bark_colour(material: str) -> tuple[float, float, float]:
-    """A bark material's plain colour (linear RGB): its species' (bark.py)."""
-    from .bark import bark_colour as colour
-
-    return colour(material)
-
 BARK_COLOUR = (0.36, 0.25, 0.16)  # linear RGB
 # linear RGB, the albedo of leaves in leaf (measured green leaves reflect
 # 0.05-0.1 in red and blue, 0.1-0.2 in green; needles darker and bluer)
@@ -56,7 +50,8 @@ class MeshOptions:
     """radial: vertices around a ring (>= 3); rings: rings per segment (>= 1);
     leaves: emit foliage cards; min_radius: m, thinner twigs are drawn this
     thick; bark_tile: m of limb length per bark texture repeat (V); bark:
-    the bark's material (bark.bark_material: `bark_oak`, or `bark`);
+    the bark's material (bark.bark_material: `bark_oak`, or `bark`) and
+    bark_rgb its plain colour (linear RGB, bark.bark_colour);
     card_scale: foliage card edge x this (fewer, larger cards above 1,
     the same optical depth: foliage.card_counts)."""
 
@@ -66,6 +61,7 @@ class MeshOptions:
     min_radius: float = 0.002
     bark_tile: float = 1.0
     bark: str = "bark"
+    bark_rgb: tuple[float, float, float] = BARK_COLOUR  # its plain colour (linear RGB)
     card_scale: float = 1.0
 
 
@@ -88,12 +84,14 @@ DETAIL = {"hero": DetailLevel(12, 2, 0.8), "default": DetailLevel(None, None, 1.
           "far": DetailLevel(4, 1, 2.0)}
 
 
-def detail_options(opts: MeshOptions, level: str, bark: str = "bark") -> MeshOptions:
-    """`opts` at detail `level` (DETAIL) with the bark material `bark`."""
+def detail_options(opts: MeshOptions, level: str, bark: str = "bark",
+                   bark_rgb: tuple[float, float, float] = BARK_COLOUR) -> MeshOptions:
+    """`opts` at detail `level` (DETAIL) with the bark material `bark` of
+    plain colour `bark_rgb` (linear RGB)."""
     d = DETAIL[level]
     return replace(opts, radial=opts.radial if d.radial is None else d.radial,
                    rings=opts.rings if d.rings is None else d.rings,
-                   card_scale=opts.card_scale * d.card_scale, bark=bark)
+                   card_scale=opts.card_scale * d.card_scale, bark=bark, bark_rgb=bark_rgb)
 
 
 @dataclass
@@ -423,7 +421,7 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
         broken = broken_joints(tree)
     pos, nrm, uv, jnt, wts, faces, tan = _bark(tree, opts, broken)
     look = None if opts.bark == "bark" else opts.bark
-    parts = [MeshPart("bark", faces.astype(np.int64), bark_colour(opts.bark), look=look)]
+    parts = [MeshPart("bark", faces.astype(np.int64), opts.bark_rgb, look=look)]
     arrays = [(pos, nrm, uv, jnt, wts)]
     offset = len(pos)
     if opts.leaves:

@@ -60,20 +60,17 @@ class TextureMap:
     normal: str | None = None
 
 
-def texture_for(material: str, detail: str = "default") -> Texture | None:
-    """The texture of a mesh material ("bark", "bark_oak", "leaf", "leaf2",
-    ...) at a detail level (bark.SCALE: the species' bark textures' size),
-    or None for materials that stay plain (projectiles)."""
-    if material == "bark":
-        return bark_texture()
-    if material.startswith("bark_"):
-        from .bark import species_bark
-
-        return species_bark(material.removeprefix("bark_"), detail)
-    if material.startswith("leaf"):
-        kind = int(material[4:] or 1)
-        return leaf_texture(kind, "far" if detail == "far" else "default")
-    return None
+def normal_map(height: np.ndarray, depth: float, scale: float) -> np.ndarray:
+    """(h, w, 3) uint8 tangent-space normals of a periodic height field
+    (0..65535 = `depth` default texels of relief; rows = v up; `scale`
+    texels per default texel): central differences that wrap, so the map
+    tiles."""
+    z = height.astype(np.float64) * (depth / 65535.0)
+    du = (np.roll(z, -1, axis=1) - np.roll(z, 1, axis=1)) * (0.5 * scale)
+    dv = (np.roll(z, -1, axis=0) - np.roll(z, 1, axis=0)) * (0.5 * scale)
+    n = np.stack([-du, -dv, np.ones_like(z)], axis=-1)
+    n = n / np.sqrt((n * n).sum(-1, keepdims=True))
+    return np.floor((n + 1.0) * 127.5 + 0.5).astype(np.uint8)
 
 
 def srgb8(linear) -> np.ndarray:
@@ -152,8 +149,6 @@ def bark_texture() -> Texture:
                                 np.maximum(shade - mid, 0)[..., None]) // mid
     rgb = np.where(shade[..., None] < mid, lo, hi)
     image = Image.fromarray(np.flipud(rgb).astype(np.uint8), "RGB")  # v = 0 at the bottom
-    from .bark import normal_map
-
     # the relief: the plates' shade, 6 texels deep (rows = v up, like rgb)
     normal = Texture("bark_normal.png", _png(Image.fromarray(np.flipud(normal_map(shade, 6.0, 1.0)),
                                                              "RGB")),
