@@ -85,7 +85,9 @@ def _cards(mesh):
 
 
 def test_foliage_cards_sit_rigidly_on_their_leafy_segment_or_nothing():
-    tree = rest_tree("oak.lsys")
+    # a grammar without twigs: the oak's leaf clusters are drawn on its twigs
+    # now (@twig), which tests/test_twigs.py checks
+    tree = rest_tree("sapling.lsys")
     mesh = tree_mesh(tree)
     leaves = [p for p in mesh.parts if p.material.startswith("leaf")]
     assert leaves and all(p.double_sided for p in leaves)
