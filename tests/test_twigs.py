@@ -214,3 +214,25 @@ def test_glb_with_twigs_validates(baked, tmp_path):
     rep = export_bake(twiggy, tmp_path, "tw", ExportOptions(formats=("glb",)))
     (report,) = validate([rep.folder / "tw.glb"])
     assert report["errors"] == 0 and report["warnings"] == 0, report["messages"][:5]
+
+
+def test_previews_draw_the_twigs_where_their_segments_carry_them(baked):
+    from treebake.preview import model_preview, posed_segments
+    from treebake.rotations import matrices_from_quaternions
+
+    _, twiggy, _ = baked
+    (tree,) = twiggy.trees
+    f = len(twiggy.times) - 1
+    starts, ends, widths, leafy = posed_segments(twiggy, f)
+    S, tw = tree.n_segments, tree.twigs
+    assert len(starts) == S + len(tw)
+    r = matrices_from_quaternions(tree.rotations[f].astype(float))
+    for i, s in enumerate(tw.segment):
+        base = tree.points[tree.seg_start[s]]
+        for got, rest in ((starts[S + i], tw.start[i]), (ends[S + i], tw.end[i])):
+            assert np.allclose(got, tree.positions[f, s] + r[s] @ (rest - base), atol=1e-5)
+    assert np.array_equal(leafy[S:], tw.leaf > 0)
+    # at rest, the preview of the tree with twigs has more bark strokes than without
+    with_twigs = np.asarray(model_preview(model(TWIGGY), 256))
+    without = np.asarray(model_preview(model(BARE), 256))
+    assert (with_twigs != without).any()
