@@ -101,7 +101,8 @@ def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 def bake_bounds(bake) -> tuple[np.ndarray, np.ndarray]:
     """Framing for every frame: the rest bounds, grown to include the motion
     but never more than one tree height beyond them (far debris is cut)."""
-    rest = np.concatenate([t.points for t in bake.trees])
+    rest = np.concatenate([p for t in bake.trees for p in (t.points, t.twigs.start,
+                                                            t.twigs.end)])
     lo, hi = rest.min(axis=0), rest.max(axis=0)
     reach = max(t.height for t in bake.trees) if bake.trees else 1.0
     moving = [t.positions.reshape(-1, 3) for t in bake.trees if not t.static]
