@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .errors import InputError
+from .model import Twigs
 from .rotations import angle_between, qrotate
 from .versions import runtime_versions
 
@@ -60,6 +61,7 @@ class TreeBake:
     extra_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) s
     extra_positions: np.ndarray | None = None  # (K, S, 3) float32; None -> (0, S, 3)
     extra_rotations: np.ndarray | None = None  # (K, S, 4) float32, x y z w
+    twigs: Twigs = field(default_factory=Twigs.none)  # drawn only, on their segments
 
     def __post_init__(self):
         S = self.seg_start.shape[0]
@@ -268,4 +270,13 @@ def tree_bake_from_model(model, positions: np.ndarray, rotations: np.ndarray,
         limb_points=[np.asarray(limb.points, dtype=np.int64) for limb in model.limbs],
         paths=model.segment_paths(),
         positions=positions.astype(np.float32), rotations=rotations.astype(np.float32),
-        info=info, extra_times=np.zeros(0))
+        info=info, extra_times=np.zeros(0), twigs=stored_twigs(model.twigs))
+
+
+def stored_twigs(twigs: Twigs) -> Twigs:
+    """`twigs` as a bake holds them (and its file stores them): geometry
+    in float32 (m), types and segments int64."""
+    f32 = np.float32
+    return Twigs(twigs.start.astype(f32), twigs.end.astype(f32), twigs.width.astype(f32),
+                 twigs.leaf.astype(np.int64), twigs.leaf_size.astype(f32),
+                 twigs.segment.astype(np.int64))

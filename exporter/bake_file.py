@@ -32,12 +32,15 @@ import numpy as np
 from .bake import Bake, ObjectsBake, TreeBake
 from .errors import InputError
 from .fileio import atomic_path
+from .model import Twigs
 
 FORMAT_VERSION = 1
 _FIXED_TIME = (1980, 1, 1, 0, 0, 0)
 _ARRAYS = ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width", "leaf",
            "leaf_size", "limb_parent", "limb_attach", "positions", "rotations")
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
+# a tree's twigs (model.Twigs), stored as `twig_<field>` when it has any
+_TWIGS = ("start", "end", "width", "leaf", "leaf_size", "segment")
 # what reading a damaged archive can raise: reported as a damaged bake
 _DAMAGE = (OSError, EOFError, zipfile.BadZipFile, zlib.error, KeyError, ValueError, TypeError,
            IndexError, AttributeError)
@@ -94,6 +97,9 @@ class BakeWriter:
         if len(tree.extra_times):  # only when present: bakes without them keep their bytes
             for key in _EXTRAS:
                 _add(self._zip, p + key, getattr(tree, key))
+        if len(tree.twigs):  # likewise
+            for key in _TWIGS:
+                _add(self._zip, p + "twig_" + key, getattr(tree.twigs, key))
         lengths = np.asarray([len(lp) for lp in tree.limb_points], dtype=np.int64)
         flat = np.concatenate(tree.limb_points) if tree.limb_points else np.zeros(0, np.int64)
         _add(self._zip, p + "limb_point_counts", lengths)
@@ -186,6 +192,16 @@ def tree_field(trees: Sequence[TreeBake], i: int, key: str) -> np.ndarray:
     return getattr(trees[i], key)
 
 
+def tree_leaf_types(trees: Sequence[TreeBake], i: int) -> np.ndarray:
+    """The leaf types of tree i's segments and twigs (0 = none), in memory
+    or stored (then only those arrays are read)."""
+    if isinstance(trees, StoredTrees):
+        twig = f"tree{i}.twig_leaf"
+        extra = trees.field(i, "twig_leaf") if twig in trees._archive else np.zeros(0, np.int64)
+        return np.concatenate([trees.field(i, "leaf"), extra])
+    return np.concatenate([trees[i].leaf, trees[i].twigs.leaf])
+
+
 def tree_info(trees: Sequence[TreeBake], i: int) -> dict:
     """Tree i's info with its name and segment paths, in memory or stored
     (then only that entry is read)."""
@@ -201,10 +217,12 @@ def _read_tree(z, i: int, times: np.ndarray, path: Path) -> TreeBake:
         counts = z[pre + "limb_point_counts"]
         flat = z[pre + "limb_points"]
         splits = np.cumsum(counts)[:-1]
+        twigs = Twigs(**{k: z[pre + "twig_" + k] for k in _TWIGS}) \
+            if pre + "twig_segment" in z else Twigs.none()
         tree = TreeBake(name=info.pop("name"), paths=info.pop("paths"),
                         limb_points=list(np.split(flat, splits)) if len(counts) else [],
                         info=info, **{k: z[pre + k] for k in _ARRAYS},
-                        **{k: z[pre + k] for k in _EXTRAS if pre + k in z})
+                        **{k: z[pre + k] for k in _EXTRAS if pre + k in z}, twigs=twigs)
         _check_tree(tree, times)
     except _DAMAGE as exc:
         raise InputError(f"{path}: not a readable treebake bake: damaged or truncated "
@@ -283,6 +301,18 @@ def _check_finite(t: TreeBake, where: str) -> None:
                              f"{int(np.argmax(bad))} on: a broken bake")
 
 
+def _check_twigs(t: TreeBake) -> None:
+    tw, n = t.twigs, len(t.twigs)
+    shapes = [tw.start.shape == (n, 3), tw.end.shape == (n, 3)] + \
+        [getattr(tw, k).shape == (n,) for k in ("width", "leaf", "leaf_size")]
+    if not all(shapes):
+        raise ValueError(f"tree {t.name!r}: its twig arrays disagree in length")
+    if n and (tw.segment.min() < 0 or tw.segment.max() >= t.n_segments):
+        raise ValueError(f"tree {t.name!r}: a twig hangs on a segment it does not have")
+    if n and not (np.isfinite(tw.start).all() and np.isfinite(tw.end).all()):
+        raise ValueError(f"tree {t.name!r}: non-finite twig geometry")
+
+
 def _check_tree(t: TreeBake, times: np.ndarray) -> None:
     """Arrays that disagree with each other (a damaged file) raise ValueError."""
     frames, s = len(times), t.n_segments
@@ -298,6 +328,7 @@ def _check_tree(t: TreeBake, times: np.ndarray) -> None:
         raise ValueError(f"tree {t.name!r}: {len(t.paths)} paths for {s} segments")
     if s and (t.seg_start.max() >= len(t.points) or t.seg_end.max() >= len(t.points)):
         raise ValueError(f"tree {t.name!r}: a segment points past its {len(t.points)} points")
+    _check_twigs(t)
     try:  # the extra sub-frame samples, when present, keep their contract too
         t.check_extras(times)
     except InputError as exc:

@@ -76,6 +76,7 @@ def inspect_summary(model, derivation) -> dict:
         "limbs": len(model.limbs),
         "segments": model.n_segments,
         "leafy_segments": int((model.leaf > 0).sum()),
+        "twigs": len(model.twigs),  # drawn only (`@twig`): not simulated
         "height_m": round(model.height, 4),
         "dbh_m": round(model.dbh(), 4),
         "wood_mass_kg": round(model.wood_mass(), 3),

@@ -17,13 +17,49 @@ Per-segment attributes (units):
     strength   bending moment that breaks the joint at the segment's base, N*m
                (inf = unbreakable); already includes any modulus of rupture
     leaf       leaf type (0 = none); leaf_size: leaf quad edge, m
+
+Twigs (`Twigs`, the grammar's `@twig`) are drawn geometry, not segments:
+each rides rigidly on one segment and adds nothing to the physics but the
+foliage its segment already carries.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+
+@dataclass(frozen=True)
+class Twigs:
+    """Twigs drawn by `@twig` (T of them): straight pieces skinned rigidly
+    to `segment`, the physics segment they grow from. No bone, joint, mass
+    or drag of their own: their wood and leaves count in that segment's
+    foliage (rig: `leaf_mass` on two cards of `leaf_size`^2).
+
+    start, end (T, 3) m (world, at rest); width (T,) diameter, m; leaf (T,)
+    leaf type (0 = none); leaf_size (T,) m; segment (T,) segment index."""
+
+    start: np.ndarray
+    end: np.ndarray
+    width: np.ndarray
+    leaf: np.ndarray
+    leaf_size: np.ndarray
+    segment: np.ndarray
+
+    @staticmethod
+    def none() -> Twigs:
+        return Twigs(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64),
+                     np.zeros(0), np.zeros(0, np.int64))
+
+    def __len__(self) -> int:
+        return int(self.segment.shape[0])
+
+    def moved(self, rotation: np.ndarray, offset: np.ndarray) -> Twigs:
+        """The twigs turned by `rotation` (3, 3) about the origin, then moved
+        by `offset` (3,) m."""
+        return replace(self, start=self.start @ rotation.T + offset,
+                       end=self.end @ rotation.T + offset)
 
 
 @dataclass
@@ -61,6 +97,7 @@ class TreeModel:
     drag: float = 1.2  # wood drag coefficient
     leaf_drag: float = 0.3  # leaf drag coefficient
     source: dict = field(default_factory=dict)  # grammar name, hash, seed, iterations
+    twigs: Twigs = field(default_factory=Twigs.none)  # drawn only (`@twig`)
 
     @property
     def n_segments(self) -> int:
@@ -148,5 +185,6 @@ def placed(model: TreeModel, position: tuple[float, float], rotation_deg: float)
     a = math.radians(rotation_deg)
     c, s = math.cos(a), math.sin(a)
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    pts = model.points @ rot.T + np.array([position[0], position[1], 0.0])
-    return dataclasses.replace(model, points=pts)
+    offset = np.array([position[0], position[1], 0.0])
+    return dataclasses.replace(model, points=model.points @ rot.T + offset,
+                               twigs=model.twigs.moved(rot, offset))

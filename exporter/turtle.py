@@ -30,7 +30,7 @@ import numpy as np
 
 from .errors import GrammarError
 from .lsystem.grammar import Grammar, Module
-from .model import Limb, TreeModel
+from .model import Limb, TreeModel, Twigs
 
 Quat = tuple[float, float, float, float]  # w, x, y, z
 
@@ -108,6 +108,7 @@ class _State:
     leaf_size: float
     tropism: tuple[float, float, float]
     elasticity: float
+    twig: int = -1  # `@twig`: F draws twigs on this segment; -1 = F draws segments
 
 
 @dataclass
@@ -120,6 +121,8 @@ class _Drawing:
     # per segment: (start, end, limb, parent_seg, width, *phys, leaf, leaf_size)
     seg_rows: list[tuple] = field(default_factory=list)
     children: dict[int, int] = field(default_factory=dict)
+    # per twig: (start xyz, end xyz, width, leaf, leaf_size, segment)
+    twig_rows: list[tuple] = field(default_factory=list)
 
 
 def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = None,
@@ -142,7 +145,10 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
             length = (params[0] if params else g.step) * g.scale
             if length == 0.0:
                 continue
-            _draw_segment(st, length, drawing)
+            if st.twig >= 0:
+                _draw_twig(st, length, drawing)
+            else:
+                _draw_segment(st, length, drawing)
         elif sym == "[":
             stack.append(st)
             st = _State(**st.__dict__)
@@ -151,6 +157,9 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
             if not stack:
                 raise fail("']' without a matching '[' in the derived string")
             st = stack.pop()
+        elif sym == "@twig":
+            if st.twig < 0:
+                st.twig = _segment_under(st, drawing.limbs, fail)
         else:
             _apply_command(st, sym, params, g, fail)
         if len(stack) > 100_000:
@@ -184,6 +193,36 @@ def _draw_segment(st: _State, length: float, drawing: _Drawing) -> None:
     st.pos, st.point, st.index = new, len(points) - 1, len(limb.points) - 1
     if st.elasticity != 0.0:
         st.q = _tropism(st.q, h, st.tropism, st.elasticity)
+
+
+def _draw_twig(st: _State, length: float, drawing: _Drawing) -> None:
+    """F after `@twig`: a twig `length` m along the heading, on segment
+    `st.twig`; the turtle moves to its end and, with tropism, bends. No
+    limb, point or segment: the physics never sees it."""
+    h = qrotate(st.q, _H)
+    new = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
+           st.pos[2] + h[2] * length)
+    drawing.twig_rows.append((*st.pos, *new, st.width, st.leaf, st.leaf_size, st.twig))
+    st.pos = new
+    if st.elasticity != 0.0:
+        st.q = _tropism(st.q, h, st.tropism, st.elasticity)
+
+
+def _segment_under(st: _State, limbs: list[Limb], fail) -> int:
+    """The segment `@twig` hangs its twigs on: the one ending at the
+    turtle's point on its limb (at a limb's base, the parent's segment
+    there, else the limb's first)."""
+    if st.limb >= 0:
+        limb = limbs[st.limb]
+        if st.index > 0:
+            return limb.segments[st.index - 1]
+        below = _segment_ending_at(limbs, limb)
+        if below >= 0:
+            return below
+        if limb.segments:
+            return limb.segments[0]
+    raise fail("@twig before any segment is drawn: a twig hangs on the segment under the "
+               "turtle")
 
 
 def _start_limb(st: _State, drawing: _Drawing) -> None:
@@ -263,6 +302,9 @@ def _tree_model(drawing: _Drawing, g: Grammar, name: str | None, seed: int | Non
     strength = np.minimum(strength, from_rupture)
     ei = np.asarray(cols[7], dtype=float)
     stiff = np.asarray(cols[8], dtype=float)
+    twigs = _twigs(drawing.twig_rows)
+    leaf, leaf_size = _with_twig_foliage(np.asarray(cols[13], dtype=np.int64),
+                                         np.asarray(cols[14], dtype=float), twigs)
     return TreeModel(
         name=name or g.name,
         points=pts,
@@ -278,8 +320,8 @@ def _tree_model(drawing: _Drawing, g: Grammar, name: str | None, seed: int | Non
         damping=np.asarray(cols[9], dtype=float),
         cone=np.radians(cone_deg),
         strength=strength,
-        leaf=np.asarray(cols[13], dtype=np.int64),
-        leaf_size=np.asarray(cols[14], dtype=float),
+        leaf=leaf,
+        leaf_size=leaf_size,
         limbs=drawing.limbs,
         anchor=ph.anchor,
         leaf_mass=ph.leaf_mass,
@@ -287,7 +329,33 @@ def _tree_model(drawing: _Drawing, g: Grammar, name: str | None, seed: int | Non
         leaf_drag=ph.leaf_drag,
         source={"grammar": g.name, "grammar_file": g.file, "grammar_hash": g.source_hash,
                 "seed": g.seed if seed is None else seed},
+        twigs=twigs,
     )
+
+
+def _twigs(rows: list[tuple]) -> Twigs:
+    if not rows:
+        return Twigs.none()
+    a = np.asarray(rows, dtype=float)
+    return Twigs(start=a[:, 0:3], end=a[:, 3:6], width=a[:, 6].copy(),
+                 leaf=a[:, 7].astype(np.int64), leaf_size=a[:, 8].copy(),
+                 segment=a[:, 9].astype(np.int64))
+
+
+def _with_twig_foliage(leaf: np.ndarray, leaf_size: np.ndarray, twigs: Twigs):
+    """Segments' leaf types and sizes with their twigs' foliage: a segment
+    whose own `@leaves` is 0 but whose twigs are leafy carries their
+    foliage in the physics (the first leafy twig's type and size), so a
+    culm with leafy side twigs has their mass and drag."""
+    leafy = np.nonzero(twigs.leaf > 0)[0]
+    if not len(leafy):
+        return leaf, leaf_size
+    leaf, leaf_size = leaf.copy(), leaf_size.copy()
+    segs, first = np.unique(twigs.segment[leafy], return_index=True)
+    bare = leaf[segs] == 0
+    leaf[segs[bare]] = twigs.leaf[leafy[first[bare]]]
+    leaf_size[segs[bare]] = twigs.leaf_size[leafy[first[bare]]]
+    return leaf, leaf_size
 
 
 def _segment_ending_at(limbs: list[Limb], limb: Limb) -> int:

@@ -486,8 +486,12 @@ def write_gltf_file(bake: Bake, meshes: Sequence[TreeMesh], job: GltfFile,
     """Write one file of an export (its trees read into memory while it is
     written, no more). Depends only on its trees: any process writes the
     same bytes."""
-    part = replace(bake, trees=[bake.trees[i] for i in job.trees])  # this file's trees, read once
-    doc, parts = build(part, job.stem, [meshes[i] for i in job.trees],
+    trees, tree_meshes = [], []
+    for i in job.trees:  # each tree read once: its mesh is built from the tree just read
+        trees.append(bake.trees[i])  # (a stored bake keeps the last tree it read)
+        tree_meshes.append(meshes[i])
+    part = replace(bake, trees=trees)  # this file's trees
+    doc, parts = build(part, job.stem, tree_meshes,
                        list(range(len(job.trees))), job.objects, settings.opts,
                        settings.frame_start, settings.textures)
     ext = ".glb" if settings.binary else ".gltf"

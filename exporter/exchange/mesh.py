@@ -30,6 +30,7 @@ import numpy as np
 from ..bake import TreeBake
 from ..rotations import apply, cross, matrices_from_quaternions
 from .foliage import cards
+from .twigs import twig_tubes
 
 
 BARK_COLOUR = (0.36, 0.25, 0.16)  # linear RGB
@@ -405,37 +406,59 @@ def leaf_material(kind: int) -> str:
 
 def part_materials_of(leaf: np.ndarray, opts: MeshOptions = MeshOptions()) -> list[str]:
     """The shading materials of the parts tree_mesh(tree, opts) makes for a
-    tree whose segments have leaf types `leaf` (TreeBake.leaf), without
-    building it."""
+    tree whose segments and twigs have leaf types `leaf` (TreeBake.leaf
+    and Twigs.leaf), without building it."""
     leaves = np.unique(leaf[leaf > 0]) if opts.leaves else []
     return [opts.bark] + [leaf_material(k) for k in leaves]
 
 
+def _foliage_pieces(tree: TreeBake):
+    """Where foliage is drawn: base and tip (N, 3) m, leaf size (N,) m, leaf
+    type (N,) and the segment each piece rides on (N,). A segment with
+    leafy twigs draws its foliage along them, any other leafy segment
+    along itself."""
+    tw = tree.twigs
+    on_twigs = np.zeros(tree.n_segments, bool)
+    on_twigs[tw.segment[tw.leaf > 0]] = True
+    segs = np.nonzero((tree.leaf > 0) & ~on_twigs)[0]
+    twigs = np.nonzero(tw.leaf > 0)[0]
+    f64 = np.float64
+    return (np.concatenate([tree.points[tree.seg_start[segs]].astype(f64), tw.start[twigs]]),
+            np.concatenate([tree.points[tree.seg_end[segs]].astype(f64), tw.end[twigs]]),
+            np.concatenate([tree.leaf_size[segs].astype(f64), tw.leaf_size[twigs]]),
+            np.concatenate([tree.leaf[segs], tw.leaf[twigs]]),
+            np.concatenate([segs, tw.segment[twigs]]))
+
+
 def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
               broken: np.ndarray | None = None) -> TreeMesh:
-    """Bark (material "bark") and leaves (one material per leaf type,
-    "leaf", "leaf2", ...) of a tree at rest."""
+    """Bark (material "bark", with the twigs' tubes) and leaves (one
+    material per leaf type, "leaf", "leaf2", ...) of a tree at rest."""
     if opts.radial < 3 or opts.rings < 1:
         raise ValueError("radial must be >= 3 and rings >= 1")
     if broken is None:
         broken = broken_joints(tree)
     pos, nrm, uv, jnt, wts, faces, tan = _bark(tree, opts, broken)
+    if len(tree.twigs):
+        tp, tn, tu, tj, tw, tf, tt = twig_tubes(tree.twigs, opts.radial, opts.min_radius,
+                                                opts.bark_tile)
+        faces = np.concatenate([faces, tf + len(pos)])
+        pos, nrm, uv = np.concatenate([pos, tp]), np.concatenate([nrm, tn]), \
+            np.concatenate([uv, tu])
+        jnt, wts, tan = np.concatenate([jnt, tj]), np.concatenate([wts, tw]), \
+            np.concatenate([tan, tt])
     look = None if opts.bark == "bark" else opts.bark
     parts = [MeshPart("bark", faces.astype(np.int64), opts.bark_rgb, look=look)]
     arrays = [(pos, nrm, uv, jnt, wts)]
     offset = len(pos)
     if opts.leaves:
-        leafy = tree.leaf > 0
-        centre = 0.5 * (tree.points[tree.seg_start[leafy]] +
-                        tree.points[tree.seg_end[leafy]]).astype(np.float64).mean(0) \
-            if leafy.any() else None
-        for kind in np.unique(tree.leaf[leafy]):
-            segs = np.nonzero(tree.leaf == kind)[0]
-            lp, ln, lu, lj, lw, lf, _ = cards(
-                tree.points[tree.seg_start[segs]].astype(np.float64),
-                tree.points[tree.seg_end[segs]].astype(np.float64),
-                tree.leaf_size[segs].astype(np.float64), segs, int(kind), tree_seed(tree),
-                centre, opts.card_scale)
+        p0, p1, size, kinds, owner = _foliage_pieces(tree)
+        centre = 0.5 * (p0 + p1).mean(0) if len(kinds) else None
+        for kind in np.unique(kinds):
+            sel = kinds == kind
+            lp, ln, lu, lj, lw, lf, _ = cards(p0[sel], p1[sel], size[sel], owner[sel],
+                                              int(kind), tree_seed(tree), centre,
+                                              opts.card_scale)
             parts.append(MeshPart(leaf_material(kind), lf + offset, leaf_colour(kind),
                                   double_sided=True))
             arrays.append((lp, ln, lu, lj, lw))

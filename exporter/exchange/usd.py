@@ -254,9 +254,13 @@ class _Writer:
         t_loc = t_loc.astype(np.float32)
         ta, ra = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr()
         anim.CreateScalesAttr(Vt.Vec3hArray(S, Gf.Vec3h(1.0, 1.0, 1.0)))
-        for f, code in enumerate(self.codes(times)):
-            ta.Set(Vt.Vec3fArray.FromNumpy(t_loc[f]), code)
-            ra.Set(Vt.QuatfArray.FromNumpy(q_loc[f]), code)
+        # the samples go straight into the layer (Sdf), in one change block:
+        # a third of the CPU of Usd.Attribute.Set per sample, the same bytes
+        layer, t_path, r_path = self.stage.GetRootLayer(), ta.GetPath(), ra.GetPath()
+        with self.Sdf.ChangeBlock():
+            for f, code in enumerate(self.codes(times)):
+                layer.SetTimeSample(t_path, code, Vt.Vec3fArray.FromNumpy(t_loc[f]))
+                layer.SetTimeSample(r_path, code, Vt.QuatfArray.FromNumpy(q_loc[f]))
         self.UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
             [anim.GetPath()])
         self.meshes(path, mesh, f"{path}/Skel")

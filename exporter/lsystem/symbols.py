@@ -17,4 +17,5 @@ AT_COMMANDS: dict[str, tuple[int, ...]] = {
     "@tropism": (1, 4),  # elasticity, or x, y, z, elasticity
     "@width": (1,),  # same as !(w)
     "@roll": (0,),  # same as $
+    "@twig": (0,),  # F draws twigs on the segment under the turtle, to the bracket's end
 }
