@@ -3,7 +3,9 @@
 treebake's own writer, and renders it with Blender (Cycles, CPU) the way
 tests/tools/blender_render.py does: a front view (from -Y), a side view
 (from +X), both framing the whole tree, and a close-up of the trunk's
-bark at about 1.5 m. Writes docs/renders/<species>_{front,side,close}.jpg
+bark at about 1.5 m (of the crown's outer foliage where foliage hides the
+bark: a spruce's skirt). Species not rendered in a run keep their images
+on disk, and the sheet shows them. Writes docs/renders/<species>_{front,side,close}.jpg
 and the sheet docs/renders/species.jpg (one row per species; README).
 
     python bench/species_sheet.py [SPECIES ...] [--out docs/renders] [--samples 16]
@@ -49,7 +51,32 @@ def views(bake_path: Path) -> dict[str, tuple[tuple[float, ...], tuple[float, ..
     close = max(1.0, 8.0 * float(tree.width[0]))
     return {"front": (mid, (look[0] + 0.1 * d, look[1] - d, look[2])),
             "side": (mid, (look[0] + d, look[1] + 0.1 * d, look[2])),
-            "close": ((base[0], base[1], z), (base[0] + 0.2 * close, base[1] - close, z - 0.1))}
+            "close": _close_up(tree, base, z, close)}
+
+
+def _close_up(tree, base, z: float, distance: float):
+    """The bark at height z from `distance` m, unless foliage hides it (a
+    spruce's skirt reaching the ground): then the crown's outer foliage at
+    a third of its height, from 3 m outside it."""
+    tw = tree.twigs
+    leafy = np.concatenate([tree.points[tree.seg_end[tree.leaf > 0]], tw.end[tw.leaf > 0]])
+    leafy = leafy.astype(np.float64)
+    bark = ((base[0], base[1], z), (base[0] + 0.2 * distance, base[1] - distance, z - 0.1))
+    if not len(leafy):
+        return bark
+    r = np.linalg.norm(leafy[:, :2] - base[:2], axis=1)
+    hides = (r < distance) & (leafy[:, 2] < z + 1.0)
+    if not hides.any():
+        return bark
+    top = float(leafy[:, 2].max())
+    band = np.abs(leafy[:, 2] - (base[2] + 0.35 * (top - base[2]))) < 0.1 * (top - base[2])
+    cand = np.nonzero(band & (leafy[:, 1] < base[1]))[0]  # the camera's (-Y) side
+    k = cand[np.argmax(r[cand])] if len(cand) else int(np.argmax(r))
+    target = leafy[k]
+    out = target[:2] - base[:2]
+    out = out / max(float(np.linalg.norm(out)), 1e-9)
+    eye = (target[0] + 3.0 * out[0], target[1] + 3.0 * out[1], target[2] + 0.5)
+    return tuple(float(v) for v in target), eye
 
 
 def render(python: Path, glb: Path, out: Path, target, eye, size: str, samples: int) -> None:
@@ -94,6 +121,16 @@ def main(argv: list[str] | None = None) -> int:
                 row.append(image)
                 print(f"{name} {view}", flush=True)
             rows.append(row)
+    # the sheet: every species, those not rendered now from their images on disk
+    done = {name: row for name, row in zip(args.species, rows)}
+    rows = []
+    for name in SPECIES:
+        stem = name.replace("/", "_")
+        files = [args.out / f"{stem}_{view}.jpg" for view in VIEWS]
+        if name in done:
+            rows.append(done[name])
+        elif all(f.is_file() for f in files):
+            rows.append([Image.open(f).convert("RGB") for f in files])
     w, h = rows[0][0].size
     half = (w // 2, h // 2)
     sheet = Image.new("RGB", (half[0] * len(VIEWS), half[1] * len(rows)), (255, 255, 255))

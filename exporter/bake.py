@@ -33,7 +33,6 @@ from .model import Twigs
 from .rotations import angle_between, qrotate
 from .versions import runtime_versions
 
-FORMAT_VERSION = 1
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
 # degrees: a segment turning more than this between two frames is fast there;
 # the simulation records sub-frame samples for it, the exporters keep them

@@ -34,7 +34,11 @@ from .errors import InputError
 from .fileio import atomic_path
 from .model import Twigs
 
-FORMAT_VERSION = 1
+# 2: trees may carry twigs (`twig_*` arrays); a bake without any is written
+# as 1, the same bytes as before twigs, and an older reader refuses a 2
+# instead of dropping its twigs
+FORMAT_VERSION = 2
+FORMATS = (1, 2)  # read
 _FIXED_TIME = (1980, 1, 1, 0, 0, 0)
 _ARRAYS = ("points", "seg_start", "seg_end", "seg_parent", "seg_limb", "width", "leaf",
            "leaf_size", "limb_parent", "limb_attach", "positions", "rotations")
@@ -78,6 +82,7 @@ class BakeWriter:
         self._stack = contextlib.ExitStack()
         self._zip: zipfile.ZipFile | None = None
         self._done = False
+        self._twigs = False  # any tree with twigs: format 2
 
     def __enter__(self) -> BakeWriter:
         tmp = self._stack.enter_context(atomic_path(self.path))
@@ -98,6 +103,7 @@ class BakeWriter:
             for key in _EXTRAS:
                 _add(self._zip, p + key, getattr(tree, key))
         if len(tree.twigs):  # likewise
+            self._twigs = True
             for key in _TWIGS:
                 _add(self._zip, p + "twig_" + key, getattr(tree.twigs, key))
         lengths = np.asarray([len(lp) for lp in tree.limb_points], dtype=np.int64)
@@ -118,7 +124,8 @@ class BakeWriter:
             _add(self._zip, "objects.sizes", objects.sizes)
             _add(self._zip, "objects.positions", objects.positions.astype(np.float32))
             _add(self._zip, "objects.rotations", objects.rotations.astype(np.float32))
-        _add(self._zip, "meta", _json_array(dict(meta, format_version=FORMAT_VERSION,
+        version = FORMAT_VERSION if self._twigs else 1
+        _add(self._zip, "meta", _json_array(dict(meta, format_version=version,
                                                  trees=self.trees)))
         self._done = True
 
@@ -178,6 +185,10 @@ class StoredTrees(Sequence[TreeBake]):
             raise InputError(f"{self._path}: not a readable treebake bake: damaged or "
                              f"truncated ({type(exc).__name__}: {exc})") from None
 
+    def has(self, i: int, key: str) -> bool:
+        """Whether tree i stores array `key` (optional ones: `twig_leaf`, ...)."""
+        return f"tree{i}.{key}" in self._archive
+
     def info(self, i: int) -> dict:
         """Tree i's info (TreeBake.info with its name and paths), reading
         nothing else."""
@@ -192,14 +203,18 @@ def tree_field(trees: Sequence[TreeBake], i: int, key: str) -> np.ndarray:
     return getattr(trees[i], key)
 
 
-def tree_leaf_types(trees: Sequence[TreeBake], i: int) -> np.ndarray:
-    """The leaf types of tree i's segments and twigs (0 = none), in memory
-    or stored (then only those arrays are read)."""
+def tree_leaf_fields(trees: Sequence[TreeBake], i: int
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tree i's segment leaf types, its twigs' leaf types and the segments
+    they ride on (0 = no leaves), in memory or stored (then only those
+    arrays are read)."""
     if isinstance(trees, StoredTrees):
-        twig = f"tree{i}.twig_leaf"
-        extra = trees.field(i, "twig_leaf") if twig in trees._archive else np.zeros(0, np.int64)
-        return np.concatenate([trees.field(i, "leaf"), extra])
-    return np.concatenate([trees[i].leaf, trees[i].twigs.leaf])
+        if trees.has(i, "twig_leaf"):
+            return (trees.field(i, "leaf"), trees.field(i, "twig_leaf"),
+                    trees.field(i, "twig_segment"))
+        return trees.field(i, "leaf"), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    t = trees[i]
+    return t.leaf, t.twigs.leaf, t.twigs.segment
 
 
 def tree_info(trees: Sequence[TreeBake], i: int) -> dict:
@@ -217,8 +232,11 @@ def _read_tree(z, i: int, times: np.ndarray, path: Path) -> TreeBake:
         counts = z[pre + "limb_point_counts"]
         flat = z[pre + "limb_points"]
         splits = np.cumsum(counts)[:-1]
-        twigs = Twigs(**{k: z[pre + "twig_" + k] for k in _TWIGS}) \
-            if pre + "twig_segment" in z else Twigs.none()
+        present = [pre + "twig_" + k in z for k in _TWIGS]
+        if any(present) and not all(present):
+            raise ValueError("some of its twig arrays are missing")
+        twigs = Twigs(**{k: z[pre + "twig_" + k] for k in _TWIGS}) if all(present) \
+            else Twigs.none()
         tree = TreeBake(name=info.pop("name"), paths=info.pop("paths"),
                         limb_points=list(np.split(flat, splits)) if len(counts) else [],
                         info=info, **{k: z[pre + k] for k in _ARRAYS},
@@ -250,9 +268,9 @@ def load_bake(path: str | Path, lazy: bool = False) -> Bake:
         if "meta" not in z:
             raise InputError(f"{p}: a .npz archive, but not a treebake bake (no meta)")
         meta = _json(z["meta"])
-        if meta.get("format_version") != FORMAT_VERSION:
+        if meta.get("format_version") not in FORMATS:
             raise InputError(f"{p}: bake format {meta.get('format_version')} is not "
-                             f"supported (expected {FORMAT_VERSION})")
+                             f"supported (this treebake reads {', '.join(map(str, FORMATS))})")
         times = z["times"]
         objects = None
         if "objects.info" in z:
@@ -302,15 +320,26 @@ def _check_finite(t: TreeBake, where: str) -> None:
 
 
 def _check_twigs(t: TreeBake) -> None:
+    """Twig arrays that disagree with each other or with the tree raise
+    ValueError: lengths, integer segments and leaf types, a segment the
+    tree has, finite geometry, widths and leaf sizes >= 0."""
     tw, n = t.twigs, len(t.twigs)
     shapes = [tw.start.shape == (n, 3), tw.end.shape == (n, 3)] + \
         [getattr(tw, k).shape == (n,) for k in ("width", "leaf", "leaf_size")]
     if not all(shapes):
         raise ValueError(f"tree {t.name!r}: its twig arrays disagree in length")
-    if n and (tw.segment.min() < 0 or tw.segment.max() >= t.n_segments):
+    if not n:
+        return
+    if not (np.issubdtype(tw.segment.dtype, np.integer) and np.issubdtype(tw.leaf.dtype,
+                                                                           np.integer)):
+        raise ValueError(f"tree {t.name!r}: twig segments and leaf types are not integers")
+    if tw.segment.min() < 0 or tw.segment.max() >= t.n_segments:
         raise ValueError(f"tree {t.name!r}: a twig hangs on a segment it does not have")
-    if n and not (np.isfinite(tw.start).all() and np.isfinite(tw.end).all()):
-        raise ValueError(f"tree {t.name!r}: non-finite twig geometry")
+    sizes = np.concatenate([tw.width, tw.leaf_size])
+    if not (np.isfinite(tw.start).all() and np.isfinite(tw.end).all()
+            and np.isfinite(sizes).all() and (sizes >= 0).all() and (tw.leaf >= 0).all()):
+        raise ValueError(f"tree {t.name!r}: non-finite or negative twig geometry, widths, "
+                         "leaf sizes or leaf types")
 
 
 def _check_tree(t: TreeBake, times: np.ndarray) -> None:

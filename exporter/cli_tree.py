@@ -65,7 +65,7 @@ def cmd_derive(args) -> int:
 
 
 def inspect_summary(model, derivation) -> dict:
-    lo, hi = model.bounds()
+    lo, hi = model.drawn_bounds()
     return {
         "name": model.name,
         "grammar": model.source.get("grammar_file"),

@@ -74,14 +74,18 @@ class DiffReport:
     curves: dict = field(default_factory=dict)  # worst segments' error per frame, for plots
     # "mujoco 3.13.0 -> 4.0.0" (A -> B) when the motion differs and the versions do
     version_differences: list[str] = field(default_factory=list)
+    # trees whose drawn twigs (`@twig`) differ at rest, e.g. "oak: 412 vs 398 twigs";
+    # twigs move with their segments, so only their rest shape can differ
+    twig_differences: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict:
-        """The report for JSON: no curves; `version_differences` only when
-        there are some."""
+        """The report for JSON: no curves; `version_differences` and
+        `twig_differences` only when there are some."""
         out = {k: v for k, v in self.__dict__.items() if k != "curves"}
         out["worst"] = [w.__dict__ for w in self.worst]
-        if not self.version_differences:
-            del out["version_differences"]
+        for key in ("version_differences", "twig_differences"):
+            if not out[key]:
+                del out[key]
         return out
 
 
@@ -196,6 +200,31 @@ def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, n
     return pos, ang
 
 
+def _twig_difference(ta: TreeBake, tb: TreeBake, tolerance: float) -> str | None:
+    """How tree ta's drawn twigs differ from tb's at rest (count, the
+    segments they ride on, or an end moved more than `tolerance` m); None
+    if they do not."""
+    a, b = ta.twigs, tb.twigs
+    if len(a) != len(b):
+        return f"{ta.name}: {len(a)} vs {len(b)} twigs"
+    if not len(a):
+        return None
+    if not np.array_equal(a.segment, b.segment):
+        k = int(np.nonzero(a.segment != b.segment)[0][0])
+        return f"{ta.name}: twig {k} rides on segment {a.segment[k]} in A, {b.segment[k]} in B"
+    moved = np.maximum(np.linalg.norm(a.start.astype(float) - b.start, axis=1),
+                       np.linalg.norm(a.end.astype(float) - b.end, axis=1))
+    k = int(np.argmax(moved))
+    if moved[k] > tolerance:
+        return f"{ta.name}: twig {k} moved {moved[k]:.3g} m at rest"
+    return None
+
+
+def _read_back(bake: Bake) -> bool:
+    """An exported file read back as a bake (glTF), which carries no twigs."""
+    return "source" in bake.meta and "tool" not in bake.meta
+
+
 def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
                angle_tolerance: float = 0.1, worst: int = 5) -> DiffReport:
     """Compare two bakes of the same trees. Tolerances: metres and degrees,
@@ -207,15 +236,20 @@ def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
     allow_pos, allow_ang, note = reduction_allowance(a, b)
     user_pos, user_ang = position_tolerance, angle_tolerance
     tally = _Tally(len(a.times), user_pos + allow_pos, user_ang + allow_ang, worst)
+    twigs = []
     for ta, tb in zip(a.trees, b.trees):
         tally.add(ta, *_tree_errors(ta, tb, tally.frames))
+        twig = None if _read_back(a) or _read_back(b) else \
+            _twig_difference(ta, tb, user_pos + allow_pos)
+        twigs += [twig] if twig else []
     first = tally.first_frame()
     return DiffReport(
         frames=tally.frames, segments=tally.segments, max_position=tally.max_pos,
         max_position_percent=tally.max_pct, rms_position=tally.rms(tally.sum_pos2),
         max_angle=tally.max_ang, rms_angle=tally.rms(tally.sum_ang2), first_frame=first,
         first_time=float(a.times[first]) if first is not None else None,
-        worst=tally.worst_rows(), noise=tally.noise(), within=first is None,
+        worst=tally.worst_rows(), noise=tally.noise() and not twigs,
+        within=first is None and not twigs, twig_differences=twigs,
         position_tolerance=user_pos, angle_tolerance=user_ang, curves=tally.curves(),
         position_allowance=allow_pos, angle_allowance=allow_ang, allowance_note=note,
         version_differences=[] if first is None else version_differences(
@@ -285,7 +319,7 @@ class _Tally:
 
 def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
     """The report as text."""
-    if r.max_position == 0 and r.max_angle == 0:
+    if r.max_position == 0 and r.max_angle == 0 and not r.twig_differences:
         verdict = "identical"
     elif r.noise:
         verdict = "noise-level (float32 round-off)"
@@ -308,6 +342,9 @@ def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
         for w in r.worst:
             lines.append(f"    {w.tree} {w.path} (segment {w.segment}): {w.max_position:.3g} m, "
                          f"{w.max_angle:.3g} deg, worst at frame {w.frame}")
+    if r.twig_differences:
+        lines.append("  twigs (drawn, not simulated) differ at rest:")
+        lines += [f"    {line}" for line in r.twig_differences]
     if r.version_differences:
         lines.append(f"  made with other versions ({name_a} -> {name_b}):")
         lines += [f"    {line}" for line in r.version_differences]

@@ -27,6 +27,8 @@ class GrammarError(InputError):
         super().__init__(str(self))
 
     def __str__(self) -> str:
+        if self.line <= 0:  # found in the derived string, which has no line of the file
+            return f"{self.file}: {self.message}"
         return f"{self.file}:{self.line}:{self.col}: {self.message}"
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from . import __version__
 from .bake import FAST_TURN_DEG, Bake
-from .bake_file import StoredTrees, check_finite, tree_info, tree_leaf_types
+from .bake_file import StoredTrees, check_finite, tree_info, tree_leaf_fields
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
 from .exchange.textures import TextureMap
@@ -221,7 +221,8 @@ def _textures(bake: Bake, opts: ExportOptions) -> dict:
     names = set()
     meshes = TreeMeshes(bake, opts.mesh, opts.detail, opts.detail_trees, species=True)
     for i in range(len(bake.trees)):
-        names.update(part_materials_of(tree_leaf_types(bake.trees, i), meshes.tree_options(i)))
+        names.update(part_materials_of(*tree_leaf_fields(bake.trees, i),
+                                       meshes.tree_options(i)))
     return {n: texture_for(n, opts.detail) for n in sorted(names)}
 
 

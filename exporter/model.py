@@ -116,7 +116,13 @@ class TreeModel:
         return float(self.points[:, 2].max() - min(0.0, self.points[:, 2].min()))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box (lo, hi) (3,) m of the segments: what the physics has."""
         return self.points.min(axis=0), self.points.max(axis=0)
+
+    def drawn_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box (lo, hi) (3,) m of what is drawn: segments and twigs."""
+        pts = np.concatenate([self.points, self.twigs.start, self.twigs.end])
+        return pts.min(axis=0), pts.max(axis=0)
 
     def wood_mass(self) -> float:
         """Total wood mass (solid cylinders), kg."""

@@ -51,10 +51,12 @@ def draw_views(starts: np.ndarray, ends: np.ndarray, widths: np.ndarray,
 
 
 def model_preview(model, size: int = 512) -> Image.Image:
-    """Preview of a TreeModel at rest."""
-    starts = model.points[model.seg_start]
-    ends = model.points[model.seg_end]
-    return draw_views(starts, ends, model.width, model.leaf > 0, size, title=model.name)
+    """Preview of a TreeModel at rest, its twigs (`@twig`) drawn too."""
+    tw = model.twigs
+    starts = np.concatenate([model.points[model.seg_start], tw.start])
+    ends = np.concatenate([model.points[model.seg_end], tw.end])
+    return draw_views(starts, ends, np.concatenate([model.width, tw.width]),
+                      np.concatenate([model.leaf, tw.leaf]) > 0, size, title=model.name)
 
 
 # ---------------------------------------------------------------------------
@@ -62,8 +64,8 @@ def model_preview(model, size: int = 512) -> Image.Image:
 
 
 def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Segment starts and ends (S, 3) m, widths (S,) m and leafy flags of
-    every tree at bake frame f; projectiles as short thick upright strokes."""
+    """Segment (and twig) starts and ends (S, 3) m, widths (S,) m and leafy
+    flags of every tree at bake frame f; projectiles as short thick upright strokes."""
     from .rotations import apply, matrices_from_quaternions
 
     starts, ends, widths, leafy = [], [], [], []
@@ -76,6 +78,13 @@ def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         ends.append(p + apply(r, rest))
         widths.append(t.width.astype(np.float64))
         leafy.append(t.leaf > 0)
+        tw = t.twigs
+        if len(tw):  # rigid on their segments
+            s, base = tw.segment, t.points[t.seg_start[tw.segment]].astype(np.float64)
+            for end, out in ((tw.start, starts), (tw.end, ends)):
+                out.append(p[s] + apply(r[s], end.astype(np.float64) - base))
+            widths.append(tw.width.astype(np.float64))
+            leafy.append(tw.leaf > 0)
     if bake.objects is not None and len(bake.objects.sizes):
         o = bake.objects
         c = o.positions[f].astype(np.float64)
@@ -92,7 +101,8 @@ def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 def bake_bounds(bake) -> tuple[np.ndarray, np.ndarray]:
     """Framing for every frame: the rest bounds, grown to include the motion
     but never more than one tree height beyond them (far debris is cut)."""
-    rest = np.concatenate([t.points for t in bake.trees])
+    rest = np.concatenate([p for t in bake.trees for p in (t.points, t.twigs.start,
+                                                            t.twigs.end)])
     lo, hi = rest.min(axis=0), rest.max(axis=0)
     reach = max(t.height for t in bake.trees) if bake.trees else 1.0
     moving = [t.positions.reshape(-1, 3) for t in bake.trees if not t.static]

@@ -78,8 +78,20 @@ def parse_size(text: str) -> int:
 
 def count_segments(modules) -> int:
     """The segments a derived string draws at most: its F modules (one of
-    zero length draws none)."""
-    return sum(1 for sym, _ in modules if sym == "F")
+    zero length draws none), but for the twigs F draws after `@twig` up to
+    the end of its bracket (geometry only, no segment: the module caps
+    bound them)."""
+    count, twig, stack = 0, False, []
+    for sym, _ in modules:
+        if sym == "F":
+            count += not twig
+        elif sym == "[":
+            stack.append(twig)
+        elif sym == "]":
+            twig = stack.pop() if stack else False
+        elif sym == "@twig":
+            twig = True
+    return count
 
 
 def check_segments(grammar_file: str | Path, segments: int, budget: Budget) -> None:

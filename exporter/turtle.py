@@ -15,7 +15,9 @@ grammar units times `scale`, default the grammar's `step`):
     \\(a) /(a) roll left/right about H      | turn around     $ roll L horizontal
     [ ] push/pop (a bracket starts a child limb)    !(w) set width, ! scale it
     @leaves(type[, size]) @tropism(e | x,y,z,e) and the physics commands of
-    `lsystem.symbols` (see docs/grammar.md). Every other symbol is ignored.
+    `lsystem.symbols` (see docs/grammar.md). @twig: to the end of the
+    bracket, F draws twigs (model.Twigs) on the segment under the turtle,
+    not segments. Every other symbol is ignored.
 Tropism (ABOP eq. 2.4): after each F the frame turns about H x T by
 e * |H x T|.
 """
@@ -211,7 +213,8 @@ def _draw_twig(st: _State, length: float, drawing: _Drawing) -> None:
 def _segment_under(st: _State, limbs: list[Limb], fail) -> int:
     """The segment `@twig` hangs its twigs on: the one ending at the
     turtle's point on its limb (at a limb's base, the parent's segment
-    there, else the limb's first)."""
+    there, else the limb's first); after `f`, the segment the turtle
+    moved away from."""
     if st.limb >= 0:
         limb = limbs[st.limb]
         if st.index > 0:
@@ -221,8 +224,8 @@ def _segment_under(st: _State, limbs: list[Limb], fail) -> int:
             return below
         if limb.segments:
             return limb.segments[0]
-    raise fail("@twig before any segment is drawn: a twig hangs on the segment under the "
-               "turtle")
+    raise fail("@twig where the turtle is on no segment (before the first F, or in a bracket "
+               "opened at the ground): a twig hangs on the segment under the turtle")
 
 
 def _start_limb(st: _State, drawing: _Drawing) -> None:

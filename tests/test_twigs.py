@@ -20,6 +20,7 @@ from treebake.errors import GrammarError, InputError
 from treebake.exchange.mesh import MeshOptions, pose, tree_mesh
 from treebake.exchange.twigs import twig_sides
 from treebake.lsystem import derive, parse_grammar
+from treebake.model import Twigs
 from treebake.pipeline import bake_scene
 from treebake.rig import build_rig
 from treebake.scene import parse_scene
@@ -79,9 +80,17 @@ def test_twigs_add_nothing_to_the_physics_but_their_foliage():
     assert a.first_frequency == b.first_frequency
 
 
-def test_twig_before_any_segment_is_a_grammar_error():
-    with pytest.raises(GrammarError, match="@twig before any segment"):
-        model("axiom: @twig F(1)\n")
+def test_a_segments_own_leaves_stay_and_a_bare_one_takes_its_first_leafy_twigs():
+    m = model("axiom: !(0.1)F(1)@leaves(1,0.2)F(1)[@twig@leaves(4,0.3)F(0.5)]"
+              "@leaves(0)F(1)[@twig@leaves(2,0.4)F(0.2)][@twig@leaves(3,0.5)F(0.2)]\n")
+    assert list(m.leaf) == [0, 1, 2] and np.allclose(m.leaf_size[1:], [0.2, 0.4])
+
+
+def test_twig_where_the_turtle_is_on_no_segment_is_a_grammar_error():
+    for text in ("axiom: @twig F(1)\n", "axiom: [F(1)F(1)][+(30)@twig F(0.5)]\n"):
+        with pytest.raises(GrammarError, match="@twig where the turtle is on no segment") as e:
+            model(text)
+        assert str(e.value).startswith("t.lsys: @twig")  # no made-up line:column
     with pytest.raises(GrammarError, match="@twig"):
         model("axiom: @twig(2) F(1)\n")  # no parameter
 
@@ -91,7 +100,8 @@ def test_cli_names_the_grammar_of_a_twig_before_any_segment(tmp_path, capsys):
     bad.write_text("axiom: [@twig F(1)]F(1)\n")
     assert main(["inspect", str(bad)]) == 2
     err = capsys.readouterr().err
-    assert "bad.lsys" in err and "@twig before any segment" in err and "Traceback" not in err
+    assert "bad.lsys" in err and "@twig where the turtle is on no segment" in err
+    assert "Traceback" not in err
 
 
 def _scene(grammar: Path, seconds=0.5):
@@ -214,3 +224,139 @@ def test_glb_with_twigs_validates(baked, tmp_path):
     rep = export_bake(twiggy, tmp_path, "tw", ExportOptions(formats=("glb",)))
     (report,) = validate([rep.folder / "tw.glb"])
     assert report["errors"] == 0 and report["warnings"] == 0, report["messages"][:5]
+
+
+def test_previews_draw_the_twigs_where_their_segments_carry_them(baked):
+    from treebake.preview import model_preview, posed_segments
+    from treebake.rotations import matrices_from_quaternions
+
+    _, twiggy, _ = baked
+    (tree,) = twiggy.trees
+    f = len(twiggy.times) - 1
+    starts, ends, widths, leafy = posed_segments(twiggy, f)
+    S, tw = tree.n_segments, tree.twigs
+    assert len(starts) == S + len(tw)
+    r = matrices_from_quaternions(tree.rotations[f].astype(float))
+    for i, s in enumerate(tw.segment):
+        base = tree.points[tree.seg_start[s]]
+        for got, rest in ((starts[S + i], tw.start[i]), (ends[S + i], tw.end[i])):
+            assert np.allclose(got, tree.positions[f, s] + r[s] @ (rest - base), atol=1e-5)
+    assert np.array_equal(leafy[S:], tw.leaf > 0)
+    # at rest, the preview of the tree with twigs has more bark strokes than without
+    with_twigs = np.asarray(model_preview(model(TWIGGY), 256))
+    without = np.asarray(model_preview(model(BARE), 256))
+    assert (with_twigs != without).any()
+
+
+def test_twigs_do_not_count_against_the_segment_cap(tmp_path):
+    from treebake.resources import count_segments
+
+    g = parse_grammar(TWIGGY, "t.lsys")
+    assert count_segments(derive(g).modules) == model(TWIGGY).n_segments == 5
+    many = tmp_path / "many.lsys"
+    many.write_text("n: 1\naxiom: !(0.05)F(1)@leaves(1)F(1)" + "[+(20)@twig!(0.005)F(0.3)]" * 200
+                    + "\n")
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'name = "s"\nduration = 0.1\n[[tree]]\ngrammar = "{many}"\n')
+    assert main(["bake", str(scene), "--max-segments", "100", "--out", str(tmp_path / "o"),
+                 "-q"]) == 0
+    assert main(["bake", str(scene), "--max-segments", "1", "--out", str(tmp_path / "o"),
+                 "-q"]) == 2  # its two segments still count
+
+
+def test_diff_sees_twigs_that_changed_and_nothing_else(baked, tmp_path, capsys):
+    from treebake.diff import diff_bakes, format_report
+
+    d, twiggy, _ = baked
+    longer = d / "longer" / "twiggy.lsys"  # the same tree name
+    longer.parent.mkdir(exist_ok=True)
+    longer.write_text(TWIGGY.replace("F(0.3)]", "F(0.8)]"))
+    other = bake_scene(_scene(longer))
+    same = diff_bakes(twiggy, twiggy)
+    assert same.within and format_report(same).splitlines()[0].endswith("identical")
+    r = diff_bakes(twiggy, other)
+    assert r.max_position == 0 and not r.within  # the motion is the same; a twig is not
+    assert r.twig_differences == ["twiggy: twig 1 moved 0.5 m at rest"]
+    assert "DIFFERENT" in format_report(r) and "twig 1 moved 0.5 m" in format_report(r)
+    fewer = d / "fewer" / "twiggy.lsys"
+    fewer.parent.mkdir(exist_ok=True)
+    fewer.write_text(TWIGGY.replace("[-(90)F(0.3)]", ""))
+    assert diff_bakes(twiggy, bake_scene(_scene(fewer))).twig_differences == \
+        ["twiggy: 4 vs 3 twigs"]
+    a, b = save_bake(twiggy, tmp_path / "a.npz"), save_bake(other, tmp_path / "b.npz")
+    assert main(["diff", str(a), str(b)]) == 1
+    assert "twig 1 moved" in capsys.readouterr().out
+
+
+def test_the_camera_sees_a_tree_by_its_twigs(tmp_path):
+    """A 2 m stem with a 6 m leafy twig out along +X, the camera looking at
+    the twig's far end only: the tree is seen (simulated), not culled."""
+    g = tmp_path / "reach.lsys"
+    g.write_text("axiom: !(0.05)F(1)@leaves(1)F(1)[-(90)@twig!(0.01)F(6)]\n")
+    m = model(g.read_text())
+    lo, hi = m.drawn_bounds()
+    assert np.allclose(hi[0], 6.0) and np.allclose(m.bounds()[1][0], 0.0)
+    scene = parse_scene({"name": "cam", "duration": 0.2, "tree": [{"grammar": str(g)}],
+                         "wind": {"speed": 10.0},
+                         "camera": {"fov": 10, "margin": 0, "keys": [
+                             {"time": 0, "position": [6.0, -20.0, 2.0],
+                              "target": [6.0, 0.0, 2.0]}]}}, file="<cam>")
+    bake = bake_scene(scene)
+    assert bake.meta["culling"]["unseen"] == 0 and not bake.trees[0].static
+
+
+def test_a_damaged_twig_record_is_named_not_a_traceback(baked, tmp_path):
+    _, twiggy, _ = baked
+    (tree,) = twiggy.trees
+    tw = tree.twigs
+    for bad_twigs, what in ((replace(tw, segment=tw.segment.astype(float)), "not integers"),
+                            (replace(tw, width=tw.width * np.nan), "non-finite"),
+                            (replace(tw, leaf_size=-tw.leaf_size), "negative")):
+        bad = replace(twiggy, trees=[replace(tree, twigs=bad_twigs)])
+        with pytest.raises(InputError, match=what):
+            load_bake(save_bake(bad, tmp_path / "bad.npz"))
+    path = save_bake(twiggy, tmp_path / "partial.npz")
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    with zipfile.ZipFile(tmp_path / "cut.npz", "w") as z:
+        for n, data in members.items():
+            if n != "tree0.twig_segment.npy":
+                z.writestr(n, data)
+    with pytest.raises(InputError, match="twig arrays are missing"):
+        load_bake(tmp_path / "cut.npz")
+
+
+def test_bakes_with_twigs_are_format_2_and_without_format_1(baked, tmp_path):
+    import json
+
+    _, twiggy, bare = baked
+    for bake, version in ((twiggy, 2), (bare, 1)):
+        with zipfile.ZipFile(save_bake(bake, tmp_path / f"{version}.npz")) as z:
+            meta = json.loads(np.load(z.open("meta.npy")).tobytes())
+        assert meta["format_version"] == version
+        assert load_bake(tmp_path / f"{version}.npz").meta["format_version"] == version
+
+
+def test_materials_follow_where_the_foliage_is_drawn():
+    from treebake.exchange.mesh import part_materials_of
+
+    leaf = np.array([0, 1, 2])
+    # segment 1's foliage is drawn on its twigs (leaf type 4): no "leaf" part
+    assert part_materials_of(leaf, np.array([4]), np.array([1])) == ["bark", "leaf2", "leaf4"]
+    assert part_materials_of(leaf, np.zeros(0, int), np.zeros(0, int)) == \
+        ["bark", "leaf", "leaf2"]
+
+
+def test_far_detail_draws_no_twig_tubes_but_keeps_their_foliage(baked):
+    from treebake.exchange.mesh import detail_options
+
+    _, twiggy, _ = baked
+    (tree,) = twiggy.trees
+    no_twigs = replace(tree, twigs=Twigs.none())
+    opts = MeshOptions()
+    far = tree_mesh(tree, detail_options(opts, "far"))
+    bark = len(far.parts[0].faces)
+    assert bark == len(tree_mesh(no_twigs, detail_options(opts, "far")).parts[0].faces)
+    assert len(tree_mesh(tree, opts).parts[0].faces) > \
+        len(tree_mesh(no_twigs, opts).parts[0].faces)  # default draws them
+    assert [p.material for p in far.parts] == ["bark", "leaf", "leaf4"]

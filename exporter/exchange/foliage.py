@@ -3,7 +3,9 @@ as textured quads skinned rigidly to that segment, so a crown is dense
 without a bone of its own for any of it. Visual only: the physics keeps
 its foliage (rig.py: `leaf_mass` kg/m^2 on 2 `leaf_size`^2 of card area
 per leafy segment, drag on that area); nothing here reaches the rig, the
-simulation or the bake.
+simulation or the bake. A "piece" below is a leafy segment, or a leafy
+twig (`@twig`: a segment with leafy twigs draws its cards along them,
+mesh.py), the cards rigid on the segment either way.
 
 Each leafy segment (length L m, leaf size a m) carries n cards of edge
 e = EDGE x a m. A card is a shoot: its stem (texture v = 0) on the

@@ -64,6 +64,7 @@ class MeshOptions:
     bark: str = "bark"
     bark_rgb: tuple[float, float, float] = BARK_COLOUR  # its plain colour (linear RGB)
     card_scale: float = 1.0
+    twigs: bool = True  # draw the twigs' tubes (their foliage is drawn either way)
 
 
 @dataclass(frozen=True)
@@ -75,14 +76,15 @@ class DetailLevel:
     radial: int | None
     rings: int | None
     card_scale: float
+    twigs: bool = True  # the twigs' tubes (`@twig`)
 
 
 # `default` is today's geometry (MeshOptions as given); `far` about half
 # the triangles (square tubes, cards 2x larger and so ~2.5x
-# fewer), `hero` smoother tubes that bend over two rings a segment and
+# fewer, no twig tubes: a few mm across, too thin to see there), `hero` smoother tubes that bend over two rings a segment and
 # smaller, more numerous cards
 DETAIL = {"hero": DetailLevel(12, 2, 0.8), "default": DetailLevel(None, None, 1.0),
-          "far": DetailLevel(4, 1, 2.0)}
+          "far": DetailLevel(4, 1, 2.0, twigs=False)}
 
 
 def detail_options(opts: MeshOptions, level: str, bark: str = "bark",
@@ -92,7 +94,8 @@ def detail_options(opts: MeshOptions, level: str, bark: str = "bark",
     d = DETAIL[level]
     return replace(opts, radial=opts.radial if d.radial is None else d.radial,
                    rings=opts.rings if d.rings is None else d.rings,
-                   card_scale=opts.card_scale * d.card_scale, bark=bark, bark_rgb=bark_rgb)
+                   card_scale=opts.card_scale * d.card_scale, bark=bark, bark_rgb=bark_rgb,
+                   twigs=opts.twigs and d.twigs)
 
 
 @dataclass
@@ -404,11 +407,24 @@ def leaf_material(kind: int) -> str:
     return "leaf" if kind == 1 else f"leaf{int(kind)}"
 
 
-def part_materials_of(leaf: np.ndarray, opts: MeshOptions = MeshOptions()) -> list[str]:
+def foliage_on_segments(leaf: np.ndarray, twig_leaf: np.ndarray,
+                        twig_segment: np.ndarray) -> np.ndarray:
+    """The segments that draw foliage along themselves: leafy ones
+    (`leaf` (S,) leaf types) without leafy twigs (`twig_leaf`,
+    `twig_segment` (T,)); the others draw it along their twigs."""
+    on_twigs = np.zeros(len(leaf), bool)
+    on_twigs[twig_segment[twig_leaf > 0]] = True
+    return np.nonzero((leaf > 0) & ~on_twigs)[0]
+
+
+def part_materials_of(leaf: np.ndarray, twig_leaf: np.ndarray, twig_segment: np.ndarray,
+                      opts: MeshOptions = MeshOptions()) -> list[str]:
     """The shading materials of the parts tree_mesh(tree, opts) makes for a
-    tree whose segments and twigs have leaf types `leaf` (TreeBake.leaf
-    and Twigs.leaf), without building it."""
-    leaves = np.unique(leaf[leaf > 0]) if opts.leaves else []
+    tree whose segments have leaf types `leaf` (TreeBake.leaf) and twigs
+    `twig_leaf` on `twig_segment` (Twigs), without building it."""
+    drawn = np.concatenate([leaf[foliage_on_segments(leaf, twig_leaf, twig_segment)],
+                            twig_leaf])
+    leaves = np.unique(drawn[drawn > 0]) if opts.leaves else []
     return [opts.bark] + [leaf_material(k) for k in leaves]
 
 
@@ -418,9 +434,7 @@ def _foliage_pieces(tree: TreeBake):
     leafy twigs draws its foliage along them, any other leafy segment
     along itself."""
     tw = tree.twigs
-    on_twigs = np.zeros(tree.n_segments, bool)
-    on_twigs[tw.segment[tw.leaf > 0]] = True
-    segs = np.nonzero((tree.leaf > 0) & ~on_twigs)[0]
+    segs = foliage_on_segments(tree.leaf, tw.leaf, tw.segment)
     twigs = np.nonzero(tw.leaf > 0)[0]
     f64 = np.float64
     return (np.concatenate([tree.points[tree.seg_start[segs]].astype(f64), tw.start[twigs]]),
@@ -439,7 +453,7 @@ def tree_mesh(tree: TreeBake, opts: MeshOptions = MeshOptions(),
     if broken is None:
         broken = broken_joints(tree)
     pos, nrm, uv, jnt, wts, faces, tan = _bark(tree, opts, broken)
-    if len(tree.twigs):
+    if len(tree.twigs) and opts.twigs:
         tp, tn, tu, tj, tw, tf, tt = twig_tubes(tree.twigs, opts.radial, opts.min_radius,
                                                 opts.bark_tile)
         faces = np.concatenate([faces, tf + len(pos)])

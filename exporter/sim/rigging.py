@@ -49,8 +49,9 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
     if scene.camera is not None:  # which trees it ever sees, and only from afar (culling.py)
         from ..culling import cull
 
-        c = cull(scene.camera, scene.duration, np.array([0.5 * (lo + hi) for lo, hi in box]),
-                 np.array([0.5 * float(np.linalg.norm(hi - lo)) for lo, hi in box]))
+        drawn = [g.model.drawn_bounds() for g in grown]  # twigs are seen too
+        c = cull(scene.camera, scene.duration, np.array([0.5 * (lo + hi) for lo, hi in drawn]),
+                 np.array([0.5 * float(np.linalg.norm(hi - lo)) for lo, hi in drawn]))
         seen, far = c.seen, c.nearest > scene.camera.far
     lo, hi = np.min([b[0] for b in box], axis=0), np.max([b[1] for b in box], axis=0)
     loads = SceneLoads(scene, np.array([lo[:2] - MARGIN, hi[:2] + MARGIN]))
