@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
 from bakes import ROOT
 from treebake.bake import tree_bake_from_model
 from treebake.exchange.foliage import ATLAS, STYLES
+from treebake.model import Twigs
 from treebake.exchange.mesh import MeshOptions, broken_joints, next_in_limb, pose, tree_mesh
 from treebake.lsystem import derive, load_grammar
 from treebake.turtle import interpret
@@ -85,9 +86,9 @@ def _cards(mesh):
 
 
 def test_foliage_cards_sit_rigidly_on_their_leafy_segment_or_nothing():
-    # a grammar without twigs: the oak's leaf clusters are drawn on its twigs
-    # now (@twig), which tests/test_twigs.py checks
-    tree = rest_tree("sapling.lsys")
+    # the oak without its twigs: with them its leaf clusters are drawn on its
+    # twigs (@twig), which tests/test_twigs.py checks
+    tree = replace(rest_tree("oak.lsys"), twigs=Twigs.none())
     mesh = tree_mesh(tree)
     leaves = [p for p in mesh.parts if p.material.startswith("leaf")]
     assert leaves and all(p.double_sided for p in leaves)
@@ -139,7 +140,8 @@ def test_foliage_follows_the_trees_seed_and_only_it():
     assert not np.array_equal(one.positions[bark:], other.positions[bark:])
     # where the tree stands does not decide its foliage: moved, the same cards, moved
     shift = np.array([37.25, -12.5, 0.0])
-    moved = tree_mesh(replace(tree, points=tree.points + shift, info={"seed": 7}))
+    moved = tree_mesh(replace(tree, points=tree.points + shift, info={"seed": 7},
+                              twigs=tree.twigs.moved(np.eye(3), shift)))
     assert moved.n_vertices == one.n_vertices
     assert np.allclose(moved.positions, one.positions + shift, atol=1e-9)
 

@@ -66,8 +66,9 @@ def lowest_mesh_point(tree) -> tuple[float, float]:
     exporters write (glTF skins it the same way), and of the physics'
     foliage: two crossed cards of `leaf size` centred on each leafy segment
     (rig.py's leaf area; the reference's envelope holds them out of the
-    ground)."""
-    mesh = tree_mesh(tree, MeshOptions(leaves=False))
+    ground). Twigs (`@twig`) are foliage to the physics, not bark: like the
+    drawn cards, they may go into the ground (docs/look.md)."""
+    mesh = tree_mesh(tree, MeshOptions(leaves=False, twigs=False))
     low = np.array([pose(mesh, tree, f)[0][:, 2] for f in range(tree.positions.shape[0])])
     segs = np.nonzero(tree.leaf > 0)[0]
     if not len(segs):
