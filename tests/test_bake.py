@@ -28,11 +28,13 @@ def test_repeated_bake_is_byte_identical(root, tmp_path):
 def test_bake_round_trips_through_npz(root, tmp_path):
     bake = bake_scene(short(root, "boxes"))
     back = load_bake(save_bake(bake, tmp_path / "b.npz"))
-    assert back.meta["scene"] == "boxes" and back.meta["format_version"] == 1
+    # format 2: the bundled species draw twigs (format 1 is a bake without any)
+    assert back.meta["scene"] == "boxes" and back.meta["format_version"] == 2
     np.testing.assert_array_equal(back.times, bake.times)
     for a, b in zip(bake.trees, back.trees):
         assert a.paths == b.paths and a.info == b.info
         np.testing.assert_array_equal(a.positions, b.positions)
+        np.testing.assert_array_equal(a.twigs.end, b.twigs.end)
         np.testing.assert_array_equal(a.rotations, b.rotations)
     np.testing.assert_array_equal(back.objects.positions, bake.objects.positions)
     assert "wall_seconds" not in back.meta  # timings vary: not part of the file

@@ -280,7 +280,11 @@ def test_a_glb_at_another_frame_start_with_tool_safe_names_diffs_like_its_bake(
 
 
 def _rotation_keys_offset(glb: bytes) -> int:
-    """Byte offset in the file of the middle of the first rotation channel's values."""
+    """Byte offset in the file of the w component of the middle key of the
+    first rotation channel's values: w is near 1 in a breeze (small turns),
+    so overwriting it leaves no unit quaternion, which the reader must
+    catch (x, y and z are near 0: overwriting them with tiny floats
+    leaves a near-unit quaternion no reader can tell from a true one)."""
     import json
     import struct
 
@@ -290,7 +294,8 @@ def _rotation_keys_offset(glb: bytes) -> int:
     ch = next(c for c in anim["channels"] if c["target"]["path"] == "rotation")
     acc = doc["accessors"][anim["samplers"][ch["sampler"]]["output"]]
     view = doc["bufferViews"][acc["bufferView"]]
-    return 20 + length + 8 + view.get("byteOffset", 0) + view["byteLength"] // 2
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    return 20 + length + 8 + start + 16 * (acc["count"] // 2) + 12  # x y z w, float32
 
 
 def test_damaged_or_foreign_inputs_are_clear_errors_not_tracebacks(sapling_export, tmp_path,

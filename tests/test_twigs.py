@@ -360,3 +360,26 @@ def test_far_detail_draws_no_twig_tubes_but_keeps_their_foliage(baked):
     assert len(tree_mesh(tree, opts).parts[0].faces) > \
         len(tree_mesh(no_twigs, opts).parts[0].faces)  # default draws them
     assert [p.material for p in far.parts] == ["bark", "leaf", "leaf4"]
+
+
+def test_twig_tangents_run_around_the_tube(baked):
+    """glTF TANGENT of a twig's tube: unit, across the normal, along +u
+    (around: the step to the next column of its ring turns the same way),
+    and N x T along the twig (+v)."""
+    _, twiggy, _ = baked
+    (tree,) = twiggy.trees
+    mesh = tree_mesh(tree, MeshOptions())
+    k = twig_sides(MeshOptions().radial)
+    n_tube = len(tree.twigs) * 2 * (k + 1)
+    first = mesh.n_vertices - sum(len(np.unique(p.faces)) for p in mesh.parts[1:]) - n_tube
+    v = np.arange(first, first + n_tube).reshape(len(tree.twigs), 2, k + 1)
+    t, n = mesh.tangents[:, :3], mesh.normals
+    ring = v[:, :, :k].ravel()
+    assert np.allclose(np.linalg.norm(t[ring], axis=1), 1) and np.allclose((t * n)[ring].sum(1), 0)
+    step = mesh.positions[ring + 1] - mesh.positions[ring]
+    assert ((step * t[ring]).sum(1) > 0).all()  # +u runs the way the ring's columns go
+    axis = (tree.twigs.end - tree.twigs.start).astype(float)
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    bitangent = np.cross(n[v], t[v])  # (T, 2, k + 1, 3)
+    assert np.allclose(bitangent, axis[:, None, None, :], atol=1e-6)
+    assert (np.diff(mesh.uvs[v][..., 1], axis=1) > 0).all()  # +v along the twig
