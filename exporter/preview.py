@@ -65,7 +65,8 @@ def model_preview(model, size: int = 512) -> Image.Image:
 
 def posed_segments(bake, f: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Segment (and twig) starts and ends (S, 3) m, widths (S,) m and leafy
-    flags of every tree at bake frame f; projectiles as short thick upright strokes."""
+    flags of every tree at bake frame f; projectiles as short thick
+    upright strokes."""
     from .rotations import apply, matrices_from_quaternions
 
     starts, ends, widths, leafy = [], [], [], []

@@ -80,9 +80,9 @@ class DetailLevel:
 
 
 # `default` is today's geometry (MeshOptions as given); `far` about half
-# the triangles (square tubes, cards 2x larger and so ~2.5x
-# fewer, no twig tubes: a few mm across, too thin to see there), `hero` smoother tubes that bend over two rings a segment and
-# smaller, more numerous cards
+# the triangles (square tubes, cards 2x larger and so ~2.5x fewer, no twig
+# tubes: a few mm across, too thin to see there), `hero` smoother tubes
+# that bend over two rings a segment and smaller, more numerous cards
 DETAIL = {"hero": DetailLevel(12, 2, 0.8), "default": DetailLevel(None, None, 1.0),
           "far": DetailLevel(4, 1, 2.0, twigs=False)}
 
