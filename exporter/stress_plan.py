@@ -170,11 +170,11 @@ def tree_bones(tree: str) -> tuple[int, int]:
 def estimate(case: Case, solver: str, level: str = "default") -> float:
     """CPU s of a run, from CPU_SECONDS: as measured if its tree was
     measured (scaled by bones if its grammar was redrawn since), else
-    scaled by (bones ratio)^BONES_POWER (bones at the run's level) from the measured trees next in size below and above it, the
-    larger of the two (the same load costs trees of one size alike only
-    roughly: a blast that breaks the sapling's joints sends it to the
-    reference, the palm's it leaves in the linear tier). nan for a run the
-    table does not know."""
+    scaled by (bones ratio)^BONES_POWER (bones at the run's level) from
+    the measured trees next in size below and above it, the larger of the
+    two (the same load costs trees of one size alike only roughly: a blast
+    that breaks the sapling's joints sends it to the reference, the palm's
+    it leaves in the linear tier). nan for a run the table does not know."""
     column = COLUMNS.index(f"planar {level}" if solver == "planar" else solver)
     known = {t: v[column] for t, v in CPU_SECONDS.get(case.kind, {}).items()
              if not math.isnan(v[column])}
