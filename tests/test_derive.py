@@ -34,6 +34,15 @@ def test_cut_symbol_erases_rest_of_branch():
     assert s("axiom: FA F\nA -> %\n", iterations=1) == "F"
 
 
+def test_rewriting_goes_on_after_a_cut_shortens_the_string():
+    # Each step cuts the side branch B opens and grows the main axis: the
+    # modules after a cut move, and the next step must still find them.
+    g = "axiom: A\nA -> [B F F F]F A\nB -> %\n"
+    assert s(g, iterations=1) == "[BFFF]FA"
+    assert s(g, iterations=2) == "[]F[BFFF]FA"
+    assert s(g, iterations=3) == "[]F[]F[BFFF]FA"
+
+
 def test_context_uses_parameters_from_both_sides():
     out = s("axiom: A(1)B(2)C(3)\nA(a) < B(b) > C(c) -> X(a+b+c)\n", iterations=1)
     assert out == "A(1)X(6)C(3)"

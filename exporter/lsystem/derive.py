@@ -66,10 +66,11 @@ def derive(grammar: Grammar, seed: int | None = None, iterations: int | None = N
     rng = np.random.default_rng(seed)
     rewriter = _Rewriter(grammar, rng, limits)
     modules: list[Module] = list(grammar.axiom)
+    rewritable = rewriter.rewritable(modules)
     counts: list[int] = []
     start = time.perf_counter()
     for it in range(n):
-        modules = rewriter.step(modules, it + 1)
+        modules, rewritable = rewriter.step(modules, rewritable, it + 1)
         counts.append(len(modules))
         if progress is not None:
             progress(it + 1, len(modules))
@@ -103,13 +104,24 @@ class _Rewriter:
         for p in grammar.productions:
             self.by_symbol.setdefault(p.pred.symbol, []).append(p)
         self.has_context = any(p.left or p.right for p in grammar.productions)
-        # Successors whose arguments are all constants are built once.
-        self.static = {}
+        # Each successor is compiled once: a module whose arguments are all
+        # constants is built here; the others keep their evaluators.
+        # (module if constant, symbol, evaluators, has productions)
+        self.built: dict[tuple[int, int], list[tuple[Module | None, str, tuple, bool]]] = {}
         for p in grammar.productions:
             for k, succ in enumerate(p.successors):
-                if all(a.const is not None for m in succ for a in m.args):
-                    self.static[(id(p), k)] = [(m.symbol, tuple(a.const for a in m.args))
-                                               for m in succ]
+                self.built[(id(p), k)] = [
+                    ((m.symbol, tuple(a.const for a in m.args)), m.symbol, (),
+                     m.symbol in self.by_symbol)
+                    if all(a.const is not None for a in m.args)
+                    else (None, m.symbol, tuple(a.evaluate for a in m.args),
+                          m.symbol in self.by_symbol)
+                    for m in succ]
+        # `%` can only come from the axiom or a successor: without one, no
+        # step needs the cut's scan.
+        self.cuts = (any(sym == "%" for sym, _ in grammar.axiom)
+                     or any(m.symbol == "%" for p in grammar.productions
+                            for succ in p.successors for m in succ))
         ignore = grammar.ignore
         consider = grammar.consider
         if consider is not None:
@@ -174,7 +186,17 @@ class _Rewriter:
         return True
 
     # -- one parallel step -------------------------------------------------
-    def step(self, modules: list[Module], iteration: int) -> list[Module]:
+    def rewritable(self, modules: list[Module]) -> list[int]:
+        """The positions of the modules some production may rewrite."""
+        by_symbol = self.by_symbol
+        return [i for i, (sym, _) in enumerate(modules) if sym in by_symbol]
+
+    def step(self, modules: list[Module], rewritable: list[int],
+             iteration: int) -> tuple[list[Module], list[int]]:
+        """One parallel rewrite of `modules`, given the positions of those
+        with productions (`rewritable`, ascending): the new string and its
+        rewritable positions. The runs between them are copied as slices:
+        a step costs what it rewrites, not the string's length."""
         limits = self.limits
         self.work += len(modules)
         if self.work > limits.max_work:
@@ -183,62 +205,67 @@ class _Rewriter:
                 f"reached at iteration {iteration}; lower the iteration count")
         match = self._brackets(modules) if self.has_context else None
         out: list[Module] = []
-        append, extend = out.append, out.extend
-        by_symbol, static, rng = self.by_symbol, self.static, self.rng
+        out_rewritable: list[int] = []
+        append, extend, mark = out.append, out.extend, out_rewritable.append
+        by_symbol, built, rng = self.by_symbol, self.built, self.rng
+        isfinite = math.isfinite
         params_total = 0
         next_check = 4096
-        for i, module in enumerate(modules):
-            prods = by_symbol.get(module[0])
-            if prods is None:
-                append(module)
-            else:
-                for p in prods:
-                    if len(module[1]) != len(p.pred.params):
+        copied = 0  # modules[copied:i] are still to be copied unchanged
+        for i in rewritable:
+            if i > copied:
+                extend(modules[copied:i])
+            copied = i + 1
+            module = modules[i]
+            for p in by_symbol[module[0]]:
+                if len(module[1]) != len(p.pred.params):
+                    continue
+                values = list(module[1])
+                if p.left and not self._left(modules, match, i, p.left, values):
+                    continue
+                if p.right and not self._right(modules, match, i, p.right, values):
+                    continue
+                try:
+                    if p.condition is not None and not p.condition.evaluate(values, rng):
                         continue
-                    values = list(module[1])
-                    if p.left and not self._left(modules, match, i, p.left, values):
-                        continue
-                    if p.right and not self._right(modules, match, i, p.right, values):
-                        continue
-                    try:
-                        if p.condition is not None and not p.condition.evaluate(values, rng):
+                    k = 0
+                    if len(p.probabilities) > 1:
+                        r = rng.random()
+                        acc = 0.0
+                        for k, pr in enumerate(p.probabilities):
+                            acc += pr
+                            if r < acc:
+                                break
+                    for const, sym, evaluators, rewrites in built[(id(p), k)]:
+                        if rewrites:
+                            mark(len(out))
+                        if const is not None:
+                            append(const)
                             continue
-                        k = 0
-                        if len(p.probabilities) > 1:
-                            r = rng.random()
-                            acc = 0.0
-                            for k, pr in enumerate(p.probabilities):
-                                acc += pr
-                                if r < acc:
-                                    break
-                        built = static.get((id(p), k))
-                        if built is not None:
-                            extend(built)
-                        else:
-                            for m in p.successors[k]:
-                                args = tuple(a.evaluate(values, rng) for a in m.args)
-                                for a in args:
-                                    if not math.isfinite(a):
-                                        raise GrammarError(
-                                            f"module {m.symbol!r} got a non-finite parameter "
-                                            f"({a}) at iteration {iteration}",
-                                            p.file, p.line, 1)
-                                params_total += len(args)
-                                append((m.symbol, args))
-                    except (ArithmeticError, ValueError) as exc:
-                        raise GrammarError(
-                            f"evaluating the production for {p.pred.symbol!r} at iteration "
-                            f"{iteration}: {math_message(exc)}", p.file, p.line, 1) from None
-                    break
-                else:
-                    append(module)
+                        args = tuple([f(values, rng) for f in evaluators])
+                        # One sum finds a non-finite argument (inf or nan
+                        # propagates); overflow of the sum alone is no error.
+                        if not isfinite(sum(args)):
+                            _check_finite(sym, args, iteration, p)
+                        params_total += len(args)
+                        append((sym, args))
+                except (ArithmeticError, ValueError) as exc:
+                    raise GrammarError(
+                        f"evaluating the production for {p.pred.symbol!r} at iteration "
+                        f"{iteration}: {math_message(exc)}", p.file, p.line, 1) from None
+                break
+            else:
+                mark(len(out))
+                append(module)
             if len(out) >= next_check:
                 next_check = len(out) + 4096
                 self._check(len(out), params_total, iteration)
+        extend(modules[copied:])
         self._check(len(out), params_total, iteration)
-        if any(sym == "%" for sym, _ in out):
+        if self.cuts and any(sym == "%" for sym, _ in out):
             out = _cut(out)
-        return out
+            out_rewritable = self.rewritable(out)
+        return out, out_rewritable
 
     def _check(self, count: int, params: int, iteration: int) -> None:
         limits = self.limits
@@ -253,6 +280,15 @@ class _Rewriter:
                 f"{self.grammar.file}: the derived string would need about "
                 f"{estimate / 2**20:.0f} MiB at iteration {iteration} (limit "
                 f"{limits.max_bytes / 2**20:.0f} MiB); lower the iteration count")
+
+
+def _check_finite(symbol: str, args: tuple[float, ...], iteration: int,
+                  p: Production) -> None:
+    for a in args:
+        if not math.isfinite(a):
+            raise GrammarError(
+                f"module {symbol!r} got a non-finite parameter ({a}) at iteration {iteration}",
+                p.file, p.line, 1)
 
 
 def _cut(modules: list[Module]) -> list[Module]:
