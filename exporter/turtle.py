@@ -62,8 +62,9 @@ def qrotate(q: Quat, v: tuple[float, float, float]) -> tuple[float, float, float
 
 
 def qnormalize(q: Quat) -> Quat:
-    n = math.sqrt(sum(c * c for c in q))
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return (w / n, x / n, y / n, z / n)
 
 
 def quat_from_frame(h, lft, u) -> Quat:
@@ -112,6 +113,12 @@ class _State:
     elasticity: float
     twig: int = -1  # `@twig`: F draws twigs on this segment; -1 = F draws segments
 
+    def copy(self) -> _State:
+        """The state `[` pushes (every field is immutable: a shallow copy)."""
+        new = object.__new__(_State)
+        new.__dict__.update(self.__dict__)
+        return new
+
 
 @dataclass
 class _Drawing:
@@ -138,6 +145,7 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
                 g.leaves, ph.leaf_size, g.tropism, g.elasticity)
     stack: list[_State] = []
     drawing = _Drawing([st.pos])  # point 0: the turtle's start
+    turns: dict[tuple, Quat] = {}  # (symbol, parameters) -> its rotation, built once
 
     def fail(message: str) -> GrammarError:
         return GrammarError(message, g.file, 0, 0)
@@ -151,9 +159,16 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
                 _draw_twig(st, length, drawing)
             else:
                 _draw_segment(st, length, drawing)
+        elif sym in _TURNS:
+            turn = turns.get((sym, params))
+            if turn is None:
+                turn = turns[(sym, params)] = _turn(sym, params, g)
+            st.q = qmul(st.q, turn)
         elif sym == "[":
             stack.append(st)
-            st = _State(**st.__dict__)
+            if len(stack) > 100_000:
+                raise fail("bracket nesting deeper than 100000")
+            st = st.copy()
             st.new_limb = True
         elif sym == "]":
             if not stack:
@@ -164,8 +179,6 @@ def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = No
                 st.twig = _segment_under(st, drawing.limbs, fail)
         else:
             _apply_command(st, sym, params, g, fail)
-        if len(stack) > 100_000:
-            raise fail("bracket nesting deeper than 100000")
     return _tree_model(drawing, g, name, seed, fail)
 
 
@@ -249,9 +262,7 @@ def _apply_command(st: _State, sym: str, params: tuple[float, ...], g: Grammar, 
     drawing), width (m), physics, leaves and tropism, applied to `st` in
     place. Other symbols are ignored; `fail(message)` builds the error."""
     if sym in _TURNS:
-        axis, sign = _TURNS[sym]
-        angle = math.radians(params[0]) if params else math.radians(g.angle)
-        st.q = qmul(st.q, qaxis(*axis, sign * angle))
+        st.q = qmul(st.q, _turn(sym, params, g))
     elif sym == "f":
         length = (params[0] if params else g.step) * g.scale
         h = qrotate(st.q, _H)
@@ -281,6 +292,14 @@ def _apply_command(st: _State, sym: str, params: tuple[float, ...], g: Grammar, 
                 raise fail("@tropism vector must not be zero")
             st.tropism = (t[0], t[1], t[2])
         st.elasticity = params[-1]
+
+
+def _turn(sym: str, params: tuple[float, ...], g: Grammar) -> Quat:
+    """The rotation of a turn command (`params[0]` degrees, default the
+    grammar's angle) in the turtle's frame."""
+    axis, sign = _TURNS[sym]
+    angle = math.radians(params[0]) if params else math.radians(g.angle)
+    return qaxis(*axis, sign * angle)
 
 
 def _tree_model(drawing: _Drawing, g: Grammar, name: str | None, seed: int | None,
