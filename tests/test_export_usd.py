@@ -106,3 +106,37 @@ def test_without_usd_core_usd_is_exit_2_before_simulating(tmp_path):
     assert done.returncode == 2, done.stderr
     assert "pip install 'treebake[usd]'" in done.stderr and "Traceback" not in done.stderr
     assert "simulating" not in done.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("message, full", [
+    ("Error occurred writing file: No space left on device", True),
+    ("Error occurred writing file: Input/output error", False)])
+def test_a_layer_usd_cannot_write_is_an_output_error_and_leaves_nothing(tmp_path, message, full):
+    """A layer is exported straight into the temporary file that replaces
+    it: when USD fails (a full disk, found by writing into a tiny tmpfs),
+    the error names the file, a full disk as such, and no file is left."""
+    from treebake.errors import OutputError
+    from treebake.exchange import usd
+
+    class Layer:
+        def Export(self, path):
+            Path(path).write_bytes(b"PXR-USDC half a layer")
+            raise pxr.Tf.ErrorException(f"\n\tError in 'WriteToAsset' : '{message}'")
+
+    class Stage:
+        def GetRootLayer(self):
+            return Layer()
+
+    w = usd._Writer(preset_bake("calm"), "job")
+    w.stage = Stage()
+    target = tmp_path / "job.usd"
+    with pytest.raises((OutputError, OSError)) as caught:
+        w.save(target)
+    if full:
+        assert isinstance(caught.value, OutputError)
+        assert f"{target}: the disk is full" in str(caught.value)
+        assert "nothing of this file was kept" in str(caught.value)
+    else:  # the CLI prints an OSError as "treebake: error: FILE: MESSAGE", exit 1
+        assert caught.value.filename == str(target)
+        assert caught.value.strerror == f"USD could not write the layer: {message}"
+    assert list(tmp_path.iterdir()) == []

@@ -17,8 +17,7 @@ attribute. Static trees are plain meshes.
 
 from __future__ import annotations
 
-import os
-import tempfile
+import errno
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +27,7 @@ import numpy as np
 from ..bake import Bake
 from ..bake_file import tree_info
 from ..errors import InputError, TreebakeError
-from ..fileio import write_bytes
+from ..fileio import atomic_path
 from ..names import joint_names
 from ..rotations import continuous, qnormalize
 from .anim import local_transforms
@@ -292,13 +291,28 @@ class _Writer:
         """USD time codes of sample times (s): frame numbers, fractional between."""
         return [float(c) for c in self.frame_start + np.asarray(times) * self.bake.fps]
 
-    def save(self, path: Path) -> bytes:
-        """The stage's bytes in the format the extension asks (.usda text,
-        .usd/.usdc binary crate)."""
-        with tempfile.TemporaryDirectory() as tmp:
-            target = os.path.join(tmp, "stage" + path.suffix)
-            self.stage.GetRootLayer().Export(target)
-            return Path(target).read_bytes()
+    def save(self, path: Path) -> Path:
+        """Write the stage to `path` atomically, in the format its extension
+        asks (.usda text, .usd/.usdc binary crate): exported straight into
+        the temporary file that is renamed over it."""
+        with atomic_path(path, suffix=".tmp" + path.suffix) as tmp:
+            try:
+                self.stage.GetRootLayer().Export(str(tmp))
+            except self.Tf.ErrorException as exc:  # as the OSError it is: a full disk named
+                raise _write_error(exc, path) from None
+        return path
+
+
+def _write_error(exc: Exception, path: Path) -> OSError:
+    """USD's error writing the layer at `path` as an OSError naming it
+    (ENOSPC where the disk was full, so that fileio reports it as such),
+    with USD's first message."""
+    text = str(exc)
+    code = errno.ENOSPC if "No space left on device" in text else errno.EIO
+    # USD's lines read "Error in 'FUNCTION' at line N in file F : 'MESSAGE'"
+    first = next((line.rsplit(" : ", 1)[-1].strip().strip("'") for line in text.splitlines()
+                  if line.strip()), "unknown error")
+    return OSError(code, f"USD could not write the layer: {first}", str(path))
 
 
 # validators that open every layer a stage depends on: on a root stage of
@@ -387,7 +401,7 @@ def write_tree_layer(bake: Bake, mesh: TreeMesh, task: LayerTask, spec: LayerSpe
     tw = _Writer(bake, task.prim, spec.frame_start, spec.maps, kind="component")
     joints = tw.tree(task.index, mesh, tw.root)
     layer = spec.out / spec.folder / f"{task.prim}{spec.ext}"
-    written = write_bytes(layer, tw.save(layer))
+    written = tw.save(layer)
     errors = [f"{layer.name}: {e}" for e in validate(layer)] if task.check else []
     return TreeLayer(written, joints, tw.subframe_codes, errors)
 
@@ -427,7 +441,7 @@ def export_usd(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
     w.objects()
     result.subframe_codes += w.subframe_codes
     path = Path(out) / f"{name}{ext}"
-    result.files.append(write_bytes(path, w.save(path)))
+    result.files.append(w.save(path))
     if check:
         result.validation_errors += validate(path, load=layers == "one")
         result.layers_checked = len(checked) if layers == "tree" else 0
