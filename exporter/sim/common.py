@@ -221,6 +221,7 @@ class Bones:
     radius: np.ndarray  # m
     bone_tree: np.ndarray  # (B,) tree index
     parent: np.ndarray  # (B,) global parent bone, -1 = ground
+    depth: np.ndarray  # (B,) joints between each bone and the ground (Rig.bone_depth)
     length: np.ndarray  # m
     props: BoneProps
     pulls: list[Pull]
@@ -267,7 +268,7 @@ class Bones:
                    cat(lambda t: t.rig.alpha), cat(lambda t: t.rig.cone),
                    cat(lambda t: t.rig.strength), radius,
                    np.repeat(np.arange(len(trees)), [t.rig.n_bones for t in trees]),
-                   parent, length, props, pulls, hinges, n)
+                   parent, cat(lambda t: t.rig.bone_depth), length, props, pulls, hinges, n)
 
     def tree(self, ti: int) -> Bones:
         """The bones of one tree (numbered from 0)."""
