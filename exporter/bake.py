@@ -175,6 +175,28 @@ class Bake:
         return 0 if tree.static else f
 
 
+class TreeStore:
+    """The trees of an in-memory bake as they come (bake_file.BakeWriter's
+    interface): every tree once, in any order."""
+
+    def __init__(self, trees: int):
+        self.order: list[int] = []
+        self._trees: dict[int, TreeBake] = {}
+        self.count = trees
+
+    def add(self, index: int, tree: TreeBake) -> None:
+        self._trees[index] = tree
+        self.order.append(index)
+
+    def finish(self, meta: dict, objects) -> None:
+        if len(self._trees) != self.count:
+            raise ValueError(f"{self.count - len(self._trees)} trees were never simulated")
+
+    @property
+    def trees(self) -> list[TreeBake]:
+        return [self._trees[i] for i in range(self.count)]
+
+
 def grown_info(grown, rig) -> dict:
     """What made a tree (grammar, its hash, seed) and its rig's first
     frequency (Hz) and bones: every tree's bake info starts with these."""

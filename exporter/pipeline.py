@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import loop
-from .bake import Bake, TreeBake, bake_meta, moved_tree_bake, objects_bake, static_tree_bake
+from .bake import Bake, TreeStore, bake_meta, moved_tree_bake, objects_bake, static_tree_bake
 from .bake_file import BakeWriter, load_bake
 from .grow import grow
 from .quality import Quality
@@ -95,24 +95,3 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     bake.timing = dict(timing, wall_seconds=round(time.perf_counter() - started, 3))
     return bake
 
-
-class TreeStore:
-    """The trees of an in-memory bake as they come (bake_file.BakeWriter's
-    interface): every tree once, in any order."""
-
-    def __init__(self, trees: int):
-        self.order: list[int] = []
-        self._trees: dict[int, TreeBake] = {}
-        self.count = trees
-
-    def add(self, index: int, tree: TreeBake) -> None:
-        self._trees[index] = tree
-        self.order.append(index)
-
-    def finish(self, meta: dict, objects) -> None:
-        if len(self._trees) != self.count:
-            raise ValueError(f"{self.count - len(self._trees)} trees were never simulated")
-
-    @property
-    def trees(self) -> list[TreeBake]:
-        return [self._trees[i] for i in range(self.count)]

@@ -80,6 +80,7 @@ class Rig:
     seg_bone: np.ndarray  # (S,) bone of each segment
     bone_limb: np.ndarray  # (B,)
     bone_parent: np.ndarray  # (B,) -1 = ground; parents come first
+    bone_depth: np.ndarray  # (B,) joints between a bone and the ground (roots 0)
     pivot: np.ndarray  # (B, 3) m, rest base (joint) point
     tip: np.ndarray  # (B, 3) m, rest end point
     mass: np.ndarray  # (B,) kg
@@ -234,9 +235,9 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
 
     zeta = model.damping[first_seg]
     rig = Rig(model.name, model, opts, seg_bone, np.asarray(bone_limb, dtype=np.int64),
-              bone_parent, pivot, tip, sums.mass, sums.com, sums.inertia, sums.radius,
-              sums.wood_area, sums.leaf_area, k, zeta, np.zeros(n), cone, strength, limbs,
-              np.zeros(len(limbs)), 0.0, model.drag, model.leaf_drag)
+              bone_parent, bone_depths(bone_parent), pivot, tip, sums.mass, sums.com,
+              sums.inertia, sums.radius, sums.wood_area, sums.leaf_area, k, zeta, np.zeros(n),
+              cone, strength, limbs, np.zeros(len(limbs)), 0.0, model.drag, model.leaf_drag)
     rig.limb_omega = limb_frequencies(rig)
     roots = [li for li, limb in enumerate(limbs) if limb.parent_bone < 0]
     rig.first_frequency = float(rig.limb_omega[roots].min()) / (2 * math.pi)
@@ -316,13 +317,20 @@ def _cylinders_inertia(m, mids, vecs, radii, com) -> np.ndarray:
     return own + shift
 
 
-def subtree_sums(parent: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Sum of `values` over each bone and all bones outboard of it."""
-    out = np.array(values, dtype=float, copy=True)
+def bone_depths(parent: np.ndarray) -> np.ndarray:
+    """Each bone's depth (B,): the joints between it and the ground (roots
+    0), for bones whose `parent` (-1: the ground) comes first."""
     depth = np.zeros(len(parent), dtype=np.int64)
     for b in range(len(parent)):  # parents first
         if parent[b] >= 0:
             depth[b] = depth[parent[b]] + 1
+    return depth
+
+
+def subtree_sums(parent: np.ndarray, depth: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Sum of `values` over each bone and all bones outboard of it (bones
+    at `depth`, bone_depths)."""
+    out = np.array(values, dtype=float, copy=True)
     for d in range(int(depth.max()) if len(parent) else 0, 0, -1):  # deepest first
         idx = np.nonzero(depth == d)[0]
         np.add.at(out, parent[idx], out[idx])
@@ -363,13 +371,10 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
     pl = np.concatenate(pair_l)
     pb = np.concatenate(pair_b)
     base = limb_parent_bone[pl]  # the fixed bone above the limb (-1 = ground)
-    msum = subtree_sums(parent, rig.mass)
-    mcsum = subtree_sums(parent, rig.mass[:, None] * rig.com)
+    depth = rig.bone_depth
+    msum = subtree_sums(parent, depth, rig.mass)
+    mcsum = subtree_sums(parent, depth, rig.mass[:, None] * rig.com)
     n_limbs = len(rig.limbs)
-    depth = np.zeros(n, dtype=np.int64)
-    for b in range(n):  # parents first
-        if parent[b] >= 0:
-            depth[b] = depth[parent[b]] + 1
     directions = np.eye(3)
     first = np.asarray([limb.bones[0] for limb in rig.limbs])
     last = np.asarray([limb.bones[-1] for limb in rig.limbs])

@@ -221,10 +221,12 @@ class Bones:
     radius: np.ndarray  # m
     bone_tree: np.ndarray  # (B,) tree index
     parent: np.ndarray  # (B,) global parent bone, -1 = ground
+    depth: np.ndarray  # (B,) joints between each bone and the ground (Rig.bone_depth)
     length: np.ndarray  # m
     props: BoneProps
     pulls: list[Pull]
     hinges: np.ndarray  # (B, 2, 3) each joint's two hinge axes (hinge_axes), world at rest
+    n: int  # B, the bones (counted once, where the arrays are made)
 
     @classmethod
     def of(cls, trees: list[SimTree]) -> Bones:
@@ -266,23 +268,19 @@ class Bones:
                    cat(lambda t: t.rig.alpha), cat(lambda t: t.rig.cone),
                    cat(lambda t: t.rig.strength), radius,
                    np.repeat(np.arange(len(trees)), [t.rig.n_bones for t in trees]),
-                   parent, length, props, pulls, hinges)
-
-    @property
-    def n(self) -> int:
-        return int(self.offsets[-1])
+                   parent, cat(lambda t: t.rig.bone_depth), length, props, pulls, hinges, n)
 
     def tree(self, ti: int) -> Bones:
         """The bones of one tree (numbered from 0)."""
         lo, hi = int(self.offsets[ti]), int(self.offsets[ti + 1])
         part = {f.name: getattr(self, f.name)[lo:hi] for f in fields(self)
-                if f.name not in ("offsets", "props", "pulls", "parent", "bone_tree")}
+                if f.name not in ("offsets", "props", "pulls", "parent", "bone_tree", "n")}
         props = self.props.take(slice(lo, hi))
         pulls = [Pull(p.bone - lo, p.force, p.ramp, p.release) for p in self.pulls
                  if lo <= p.bone < hi]
         return Bones(offsets=np.array([0, hi - lo]), props=props, pulls=pulls,
                      parent=np.where(self.parent[lo:hi] >= 0, self.parent[lo:hi] - lo, -1),
-                     bone_tree=np.zeros(hi - lo, dtype=np.int64), **part)
+                     bone_tree=np.zeros(hi - lo, dtype=np.int64), n=hi - lo, **part)
 
     def pull_forces(self, t: float) -> np.ndarray | None:
         """World force (N) of the pulls acting at time t on each bone: rising

@@ -1,5 +1,6 @@
 """What passes between the planar LOD's tiers: why a tree left one (`Reason`),
-the state it left in (`HandOff`), which engine takes it (`engine_for`), and
+the state it left in (`HandOff`), which engine takes it (`engine_for`), the
+stretches of its shot in each engine (`TierSpan`, in words `spans_text`), and
 the protocol every tier implements (`Tier`)."""
 
 from __future__ import annotations
@@ -111,6 +112,15 @@ class TierSpan:
     start: float | None = None
     reason: Reason | None = None
     detail: str = ""
+
+
+def spans_text(spans: list[TierSpan]) -> str:
+    """Which engines moved a tree and from when, in words: "linear, then
+    reference from 1.234 s (trunk/2:0: a joint past 80% of its strength)"."""
+    first = spans[0]
+    parts = [f"{first.engine.value} ({first.detail})" if first.detail else first.engine.value]
+    parts += [f"{s.engine.value} from {s.start:.3f} s ({s.detail})" for s in spans[1:]]
+    return ", then ".join(parts)
 
 
 class Tier(Protocol):

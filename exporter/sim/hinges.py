@@ -9,7 +9,6 @@ import numpy as np
 
 from ..rotations import qmul_rows, qrotate_rows
 from .common import Bones
-from .treefactor import depths
 
 
 def pose_frames(bones: Bones, qs: np.ndarray):
@@ -25,8 +24,7 @@ def pose_frames(bones: Bones, qs: np.ndarray):
     half = 0.5 * qs.reshape(frames, nb, 2)
     rot = np.empty((4, frames, nb))
     piv = np.empty((3, frames, nb))
-    parent = bones.parent
-    depth = depths(parent)
+    parent, depth = bones.parent, bones.depth
     for d in range(int(depth.max()) + 1 if nb else 0):
         b = np.nonzero(depth == d)[0]
         own = None

@@ -44,7 +44,7 @@ from .common import Bones
 from .layout import ChainLayout
 from .lowrank import LowRankFactor, TreeMatrix
 from .rules import limb_damping
-from .treefactor import TreeFactor, ancestor_table, depths
+from .treefactor import TreeFactor, ancestor_table
 from .treesums import ChainSums
 
 EXPLICIT_DEPTH = 256  # dofs: deeper trees take the low-rank factor (docs/physics.md)
@@ -124,6 +124,8 @@ class JointSpace:
         parent[0::2] = np.where(bones.parent >= 0, 2 * bones.parent + 1, -1)
         parent[1::2] = np.arange(0, n, 2)
         self.parent = parent
+        # a bone's first hinge hangs on its parent's second: dof depths from the bones'
+        self.depth = 2 * bones.depth[dof_bone] + np.arange(n) % 2
         self.sums = ChainSums(layout.chain_bones, layout.chain_parent, layout.chain_depth, nb)
         self.k_spring = np.repeat(bones.k, 2)
         self.limb = limb = layout.bone_chain[dof_bone]
@@ -136,7 +138,7 @@ class JointSpace:
         # origin: its recursion then cancels no more digits than a tree's
         # size); the others the explicit one (treefactor.py), entry by entry
         # (O(n x depth)), faster for bushy trees' short paths
-        self.deep = n > 0 and int(depths(parent).max()) > EXPLICIT_DEPTH
+        self.deep = n > 0 and int(self.depth.max()) > EXPLICIT_DEPTH
         self.origin = bones.pivot0[bones.offsets[bones.bone_tree]] if self.deep else None
         self.gravity = np.asarray(gravity, dtype=float)
         # the solve runs chain by chain: a bone chain's dofs, in order
@@ -296,7 +298,7 @@ class JointSpace:
         """Every (upstream i, downstream j) pair, root-aligned (i is j's
         ancestor at depth t: (ii, jj, tt), the table's shape) and M's, C's
         and K's entries there: O(n x depth)."""
-        depth = depths(self.parent)
+        depth = self.depth
         anc = ancestor_table(self.parent, depth)
         jj, tt = np.nonzero(np.arange(anc.shape[1])[None, :] < depth[:, None])
         ii = anc[jj, tt]

@@ -21,7 +21,8 @@ from ..quality import Quality
 from ..scene import Scene
 from .common import SimTree
 from .loads import SceneLoads
-from .notes import solve_result, spans_text
+from .handoff import spans_text
+from .notes import solve_result
 from .progress import ChunkProgress
 from .scheduler import ChunkResult, results_in_order, simulate_chunk
 from .solver import SolveResult

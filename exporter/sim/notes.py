@@ -9,7 +9,7 @@ import numpy as np
 from ..quality import Quality
 from ..scene import Scene
 from .common import SimTree, cap_note
-from .handoff import Engine, Reason, TierReport, TierSpan
+from .handoff import Engine, Reason, TierReport, spans_text
 from .linear import BLAST_SPLIT, ERROR_TOLERANCE
 from .rules import MAX_SPIN, broken_note
 from .solver import SolveResult, frame_timing
@@ -34,16 +34,6 @@ def solve_result(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], re
     meta["chunks"] = len(plan)
     objects = next((res.objects for res in results if res.objects is not None), None)
     return SolveResult(motions, objects, meta, notes, tiers, timing_of(reports, scene))
-
-
-def spans_text(spans: list[TierSpan]) -> str:
-    """Which engines moved a tree and from when, in words: "linear, then
-    reference from 1.234 s (trunk/2:0: a joint past 80% of its strength)"."""
-    first = spans[0]
-    parts = [f"{first.engine.value} ({first.detail})" if first.detail else first.engine.value]
-    parts += [f"{s.engine.value} from {s.start:.3f} s ({s.detail})" for s in spans[1:]]
-    return ", then ".join(parts)
-
 
 
 def summarise(reports: list[TierReport], returned: int) -> tuple[dict, list[str]]:

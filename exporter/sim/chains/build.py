@@ -42,7 +42,6 @@ class ChainBuild:
         self.bones = Bones.of(self.trees)
         for f in fields(Bones):  # as attributes: the solver reads them everywhere
             setattr(self, f.name, getattr(self.bones, f.name))
-        self.n = self.bones.n
         self.stats.bones = self.n
 
     def _chains(self) -> None:
