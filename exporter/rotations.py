@@ -189,6 +189,21 @@ def rotvecs_from_matrices(r: np.ndarray) -> np.ndarray:
 # quaternion helpers (x y z w, float64, vectorised over leading axes)
 
 
+def dot_last(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(a * b).sum(-1), component by component: the same products added in
+    the same order (the same bits), several times faster than numpy's
+    reduction over a short last axis (3 or 4) of a large array."""
+    out = a[..., 0] * b[..., 0]
+    for k in range(1, a.shape[-1]):
+        out += a[..., k] * b[..., k]
+    return out
+
+
+def norm_last(x: np.ndarray) -> np.ndarray:
+    """np.linalg.norm(x, axis=-1) for real x, the same bits (dot_last)."""
+    return np.sqrt(dot_last(x, x))
+
+
 def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ax, ay, az, aw = np.moveaxis(a, -1, 0)
     bx, by, bz, bw = np.moveaxis(b, -1, 0)
@@ -214,13 +229,13 @@ def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation angle (rad) between unit quaternions (..., 4), for q and -q
     alike, accurate near zero (2 arccos(a.b) is not: float32 keys 1 ulp apart
     would read as 0.04 degrees)."""
-    s = np.where((a * b).sum(-1, keepdims=True) < 0, -1.0, 1.0)
-    d = np.linalg.norm(a - s * b, axis=-1)
+    s = np.where(dot_last(a, b)[..., None] < 0, -1.0, 1.0)
+    d = norm_last(a - s * b)
     return 4.0 * np.arcsin(np.clip(0.5 * d, 0.0, 1.0))
 
 
 def qnormalize(q: np.ndarray) -> np.ndarray:
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return q / norm_last(q)[..., None]
 
 
 def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -236,7 +251,7 @@ def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
 
 def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Shortest-path slerp of unit quaternions (..., 4), t (...)."""
-    d = (a * b).sum(-1)
+    d = dot_last(a, b)
     b = np.where(d[..., None] < 0, -b, b)
     d = np.abs(d)
     theta = np.arccos(np.clip(d, -1.0, 1.0))

@@ -38,6 +38,8 @@ import numpy as np
 from ..rotations import (
     angle_between,
     continuous,
+    dot_last,
+    norm_last,
     qconj,
     qmul,
     qnormalize,
@@ -172,8 +174,8 @@ def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool,
     va = np.take_along_axis(values, prev[..., None], axis=1)
     vb = np.take_along_axis(values, nxt[..., None], axis=1)
     if not rotation:
-        return np.linalg.norm(va + (vb - va) * t[..., None] - values, axis=-1)
-    d = (va * vb).sum(-1)
+        return norm_last(va + (vb - va) * t[..., None] - values)
+    d = dot_last(va, vb)
     vb = np.where(d[..., None] < 0, -vb, vb)
     half = np.arccos(np.clip(np.abs(d), 0.0, 1.0))  # half the rotation between the keys
     gap = 2.0 * np.abs(t * half - np.arctan2(t * np.sin(half), 1.0 - t + t * np.cos(half)))
@@ -203,7 +205,7 @@ def _midpoint_errors(values: np.ndarray, rotation: bool,
         at = idx.astype(np.float64) if times is None else np.asarray(times, np.float64)
         w = (at[1:-1] - at[before]) / (at[after] - at[before])
     if not rotation:
-        err = np.linalg.norm(a + (b - a) * w[..., None] - v, axis=-1)
+        err = norm_last(a + (b - a) * w[..., None] - v)
     else:
         err = angle_between(slerp(a, b, w), v)
     return err if allowed is None else np.where(allowed[:, 1:-1], err, 0.0)
@@ -250,7 +252,7 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
 def _constant(values: np.ndarray, tol: np.ndarray, rotation: bool,
               allowed: np.ndarray) -> np.ndarray:
     ref = values[:, :1]
-    dev = angle_between(values, ref) if rotation else np.linalg.norm(values - ref, axis=-1)
+    dev = angle_between(values, ref) if rotation else norm_last(values - ref)
     return ((dev <= tol[:, None]) | ~allowed).all(axis=1)
 
 
@@ -287,9 +289,9 @@ def _world_error(parent, t_loc, q_loc, keep_t, keep_q, pos, rot, seg_vec, times=
     if at is not None:
         t_r, q_r, pos, rot = t_r[at], q_r[at], pos[at], rot[at]
     wp, wq = forward(parent, depth_order(parent), t_r, q_r)
-    e_base = np.linalg.norm(wp - pos, axis=-1).max(axis=0)
-    e_tip = np.linalg.norm(wp + qrotate(wq, seg_vec[None]) - pos - qrotate(rot, seg_vec[None]),
-                           axis=-1).max(axis=0)
+    e_base = norm_last(wp - pos).max(axis=0)
+    e_tip = norm_last(wp + qrotate(wq, seg_vec[None]) - pos
+                      - qrotate(rot, seg_vec[None])).max(axis=0)
     return np.maximum(e_base, e_tip), angle_between(wq, rot).max(axis=0)
 
 
