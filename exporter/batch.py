@@ -38,7 +38,7 @@ from .batch_jobs import Job, JobResult, load_jobs, scene_of
 from .batch_pool import MAX_ATTEMPTS, StopSignals, run_processes, run_serial
 from .batch_summary import format_table, summary
 from .errors import BusyError, TreebakeError
-from .fileio import job_lock, write_text
+from .fileio import job_lock, temporary_files, write_text
 from .fingerprint import ResumeFingerprint, code_fingerprint
 from .resources import Budget
 from .versions import NOT_INSTALLED, UNKNOWN, VersionChange, runtime_versions, version_changes
@@ -62,10 +62,9 @@ def resume_fingerprint(job: Job) -> ResumeFingerprint:
 
 
 def _clean_stale(folder: Path) -> None:
-    """Temporary files a killed run left behind (`.name.xxxx.tmp`)."""
-    if folder.is_dir():
-        for tmp in folder.rglob(".*.tmp"):
-            tmp.unlink(missing_ok=True)
+    """Temporary files a killed run left behind (fileio.temporary_files)."""
+    for tmp in temporary_files(folder):
+        tmp.unlink(missing_ok=True)
 
 
 def file_record(folder: Path, path: Path) -> dict:

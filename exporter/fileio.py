@@ -44,6 +44,17 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
         raise
 
 
+def temporary_files(folder: str | Path) -> list[Path]:
+    """The temporary files atomic_path makes below `folder` and a killed
+    run leaves behind: `.NAME.XXXX.tmp`, or `.NAME.XXXX.tmp.EXT` where the
+    writer needs the target's extension (USD)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p for pattern in (".*.tmp", ".*.tmp.*") for p in folder.rglob(pattern)
+                  if p.is_file())
+
+
 def _read_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -473,3 +473,21 @@ def test_dask_without_workers_fails_clearly_after_the_timeout(tmp_path, root):
             run_batch(jobs, tmp_path / "out", executor="dask",
                       scheduler=cluster.scheduler_address, worker_timeout=2.0)
         assert time.time() - started < 30
+
+
+def test_a_resumed_job_removes_the_temporaries_a_killed_run_left(tmp_path):
+    """atomic_path's temporaries, `.NAME.XXXX.tmp` and (USD's, which keep
+    the target's extension) `.NAME.XXXX.tmp.EXT`, are removed before a job
+    runs again; finished files and other dotfiles stay."""
+    from treebake.batch import _clean_stale
+
+    layers = tmp_path / "job.trees"
+    layers.mkdir()
+    stale = [tmp_path / ".job.npz.a1b2.tmp", tmp_path / ".job.usd.c3d4.tmp.usd",
+             layers / ".oak_1.usda.e5f6.tmp.usda"]
+    kept = [tmp_path / "job.usd", layers / "oak_1.usda", tmp_path / ".treebake.lock"]
+    for p in stale + kept:
+        p.write_bytes(b"x")
+    _clean_stale(tmp_path)
+    assert [p for p in stale if p.exists()] == []
+    assert all(p.exists() for p in kept)

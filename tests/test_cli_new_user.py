@@ -6,6 +6,7 @@ from pathlib import Path
 
 from treebake import library
 from treebake.cli import main
+from treebake.fileio import temporary_files
 
 QUICK = ["--duration", "0.2", "--fps", "10", "--quality", "draft", "-q"]
 
@@ -131,9 +132,9 @@ def test_sway_shows_progress_like_bake(tmp_path):
 def test_a_bake_leaves_no_lock_file(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["bake", "sapling", *QUICK, "--format", "glb"]) == 0
-    assert main(["export", "out/sapling/sapling.npz", "-q"]) == 0
+    assert main(["export", "out/sapling/sapling.npz", "-q", "--format", "glb,usd,usda"]) == 0
     assert not list(tmp_path.rglob(".treebake.lock"))
-    assert not list(tmp_path.rglob(".*.tmp"))
+    assert temporary_files(tmp_path) == []
 
 
 def test_a_bake_that_fails_leaves_no_empty_folder(tmp_path, monkeypatch, capsys):

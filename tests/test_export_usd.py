@@ -140,3 +140,19 @@ def test_a_layer_usd_cannot_write_is_an_output_error_and_leaves_nothing(tmp_path
         assert caught.value.filename == str(target)
         assert caught.value.strerror == f"USD could not write the layer: {message}"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_layer_export_that_reports_failure_leaves_no_empty_file(tmp_path):
+    """Export returning False without raising: an error, not the empty
+    temporary file renamed over the target."""
+    from treebake.exchange import usd
+
+    class Stage:
+        def GetRootLayer(self):
+            return type("Layer", (), {"Export": lambda self, path: False})()
+
+    w = usd._Writer(preset_bake("calm"), "job")
+    w.stage = Stage()
+    with pytest.raises(OSError, match="USD could not write the layer"):
+        w.save(tmp_path / "job.usd")
+    assert list(tmp_path.iterdir()) == []

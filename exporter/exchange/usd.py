@@ -297,9 +297,11 @@ class _Writer:
         the temporary file that is renamed over it."""
         with atomic_path(path, suffix=".tmp" + path.suffix) as tmp:
             try:
-                self.stage.GetRootLayer().Export(str(tmp))
+                written = self.stage.GetRootLayer().Export(str(tmp))
             except self.Tf.ErrorException as exc:  # as the OSError it is: a full disk named
                 raise _write_error(exc, path) from None
+            if not written:  # no error raised, yet not written: never an empty file renamed
+                raise OSError(errno.EIO, "USD could not write the layer", str(path))
         return path
 
 
