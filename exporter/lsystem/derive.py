@@ -117,6 +117,11 @@ class _Rewriter:
                     else (None, m.symbol, tuple(a.evaluate for a in m.args),
                           m.symbol in self.by_symbol)
                     for m in succ]
+        # the constant modules' parameters a successor's evaluation adds to the
+        # memory estimate: counted where it builds others, as new tuples
+        self.const_params = {key: sum(len(m[1]) for m, _, _, _ in mods if m is not None)
+                             if any(m is None for m, _, _, _ in mods) else 0
+                             for key, mods in self.built.items()}
         # `%` can only come from the axiom or a successor: without one, no
         # step needs the cut's scan.
         self.cuts = (any(sym == "%" for sym, _ in grammar.axiom)
@@ -208,6 +213,7 @@ class _Rewriter:
         out_rewritable: list[int] = []
         append, extend, mark = out.append, out.extend, out_rewritable.append
         by_symbol, built, rng = self.by_symbol, self.built, self.rng
+        const_params = self.const_params
         isfinite = math.isfinite
         params_total = 0
         next_check = 4096
@@ -215,6 +221,9 @@ class _Rewriter:
         for i in rewritable:
             if i > copied:
                 extend(modules[copied:i])
+                if len(out) >= next_check:  # a long copied run: the caps first
+                    next_check = len(out) + 4096
+                    self._check(len(out), params_total, iteration)
             copied = i + 1
             module = modules[i]
             for p in by_symbol[module[0]]:
@@ -236,6 +245,7 @@ class _Rewriter:
                             acc += pr
                             if r < acc:
                                 break
+                    params_total += const_params[(id(p), k)]
                     for const, sym, evaluators, rewrites in built[(id(p), k)]:
                         if rewrites:
                             mark(len(out))
