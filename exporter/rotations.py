@@ -190,9 +190,12 @@ def rotvecs_from_matrices(r: np.ndarray) -> np.ndarray:
 
 
 def dot_last(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(a * b).sum(-1), component by component: the same products added in
-    the same order (the same bits), several times faster than numpy's
-    reduction over a short last axis (3 or 4) of a large array."""
+    """(a * b).sum(-1) for float32/float64 a and b with the same last axis,
+    component by component: the same products added in the same order
+    (the same bits, but for the sign of a zero sum), several times faster
+    than numpy's reduction over a short last axis (3 or 4) of a large array."""
+    if a.shape[-1] != b.shape[-1]:
+        raise ValueError(f"last axes differ: {a.shape} and {b.shape}")
     out = a[..., 0] * b[..., 0]
     for k in range(1, a.shape[-1]):
         out += a[..., k] * b[..., k]
