@@ -258,12 +258,11 @@ def _start_limb(st: _State, drawing: _Drawing) -> None:
 
 
 def _apply_command(st: _State, sym: str, params: tuple[float, ...], g: Grammar, fail) -> None:
-    """Every command but F, [ and ]: turns (degrees), f (moves without
-    drawing), width (m), physics, leaves and tropism, applied to `st` in
-    place. Other symbols are ignored; `fail(message)` builds the error."""
-    if sym in _TURNS:
-        st.q = qmul(st.q, _turn(sym, params, g))
-    elif sym == "f":
+    """Every command but F, [, ], @twig and the turns (interpret applies
+    those): f (moves without drawing), width (m), physics, leaves and
+    tropism, applied to `st` in place. Other symbols are ignored;
+    `fail(message)` builds the error."""
+    if sym == "f":
         length = (params[0] if params else g.step) * g.scale
         h = qrotate(st.q, _H)
         st.pos = (st.pos[0] + h[0] * length, st.pos[1] + h[1] * length,
