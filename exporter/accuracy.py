@@ -185,10 +185,35 @@ def dominant_frequency(bake: Bake, stem_top: int) -> float:
     return float(freqs[int(np.argmax(spec))]) if spec.max() > 0 else math.nan
 
 
-def _bake(scene: Scene, s: Setting) -> tuple[Bake, float]:
-    start = time.process_time()
-    bake = bake_scene(scene, solver=s.solver, quality=s.quality, timestep=s.timestep)
-    return bake, time.process_time() - start
+def _truth(scene: Scene) -> Bake:
+    """The MuJoCo reference, one bone per segment, at TRUTH_STEP: what every
+    setting is compared with (untimed)."""
+    return bake_scene(scene, solver="full", quality=QUALITIES["final"], timestep=TRUTH_STEP)
+
+
+REPEAT_BELOW = 1.0  # CPU s: bakes cheaper than this are timed more than once
+MAX_REPEATS = 5
+
+
+def _bake(scene: Scene, s: Setting, clock=time.process_time) -> tuple[Bake, float]:
+    """The bake and its cost (CPU s): the least of up to MAX_REPEATS runs
+    while they add up to less than REPEAT_BELOW. One run of a cheap bake
+    also pays one-off costs, the first import of an engine's modules above
+    all, and they would be charged to whichever setting happens to run
+    first (a palm's `draft`, 0.15 s, measured 25 % dearer first than
+    second). The bake is deterministic: every run gives the same motion."""
+    best, spent = math.inf, 0.0
+    bake = None
+    for _ in range(MAX_REPEATS):
+        start = clock()
+        run = bake_scene(scene, solver=s.solver, quality=s.quality, timestep=s.timestep)
+        cpu = clock() - start
+        spent += cpu
+        if cpu < best:
+            bake, best = run, cpu
+        if spent >= REPEAT_BELOW:
+            break
+    return bake, best
 
 
 def _solver_seconds(bake: Bake) -> float:
@@ -203,7 +228,7 @@ def run_case(species: str, scenario: str, duration: float, settings: dict[str, S
     with tempfile.TemporaryDirectory() as tmp:
         scene = case_scene(species, scenario, duration, Path(tmp))
         kind = case_kind(species)
-        truth, _ = _bake(scene, Setting("full", QUALITIES["final"], TRUTH_STEP))
+        truth = _truth(scene)
         stem_top = None
         if len(truth.trees) == 1:
             stem_top = grow(scene)[0].model.main_stem()[-1]
@@ -277,7 +302,7 @@ def run_events(settings: dict[str, Setting], log=None) -> list[dict]:
         for t in raw["tree"]:
             t["grammar"] = str(grammars_folder().parent / t["grammar"])
         scene = parse_scene({"name": name, "fps": 24.0, **raw}, file=f"<accuracy {name}>")
-        truth, _ = _bake(scene, Setting("full", QUALITIES["final"], TRUTH_STEP))
+        truth = _truth(scene)
         ref = event_metrics(truth.trees[ti], truth.fps)
         for label, s in [("truth", None), *settings.items()]:
             if s is None:
