@@ -290,15 +290,15 @@ def frontal_areas(axis: np.ndarray, direction: np.ndarray, wood_area: np.ndarray
 # explosion
 
 
-def _moment(k: int, beta: np.ndarray | float, x: np.ndarray) -> np.ndarray:
-    """int_0^x u^k e^(-beta u) du for k = 0, 1, 2 (beta > 0)."""
+def _moments(beta: np.ndarray | float, x: np.ndarray, k_max: int) -> list[np.ndarray]:
+    """int_0^x u^k e^(-beta u) du for k = 0 .. k_max <= 2 (beta > 0), on one
+    exponential."""
     y = beta * x
     e = np.exp(-y)
-    if k == 0:
-        return (1 - e) / beta
-    if k == 1:
-        return (1 - e * (1 + y)) / beta**2
-    return (2 - e * (y * y + 2 * y + 2)) / beta**3
+    out = [(1 - e) / beta, (1 - e * (1 + y)) / beta**2,
+           (2 - e * (y * y + 2 * y + 2)) / beta**3] if k_max == 2 else \
+        [(1 - e) / beta, (1 - e * (1 + y)) / beta**2]
+    return out
 
 
 def kinney_graham_overpressure(z: np.ndarray) -> np.ndarray:
@@ -377,17 +377,32 @@ class Explosion:
         orientation (exact: the Friedlander pulse and the diffraction's
         clearing integrate in closed form), the front's arrival and the
         positive phase's duration (N,) s."""
+        (impulse,), arrival, td = self.impulses(points, (t,), axis, wood_area, leaf_area,
+                                                diameter, cd_wood, cd_leaf)
+        return impulse, arrival, td
+
+    def impulses(self, points: np.ndarray, times, axis: np.ndarray, wood_area: np.ndarray,
+                 leaf_area: np.ndarray, diameter: np.ndarray, cd_wood, cd_leaf):
+        """`impulse` at each of `times` (s) for the same members: a list of
+        (N, 3) N s, the arrival and the duration (N,) s. The front and the
+        areas are the same at every time and are worked out once (a blast's
+        load over a hold is the difference of two impulses)."""
         direction, ps, qs, td, arrival = self.front(points)
-        x = np.clip((t - arrival) / td, 0.0, 1.0)
         clear = np.maximum(3 * diameter / SOUND_SPEED, 1e-5)
-        # int_0^x (1-u) e^(-b u) du, and int_0^x (1-u)^2 e^(-2 b u) du
         beta = self.decay + td / clear
-        drag = qs * td * (_moment(0, 2 * self.decay, x) - 2 * _moment(1, 2 * self.decay, x)
-                          + _moment(2, 2 * self.decay, x))
-        pulse = ps * td * (_moment(0, beta, x) - _moment(1, beta, x))
         wood, leaf = frontal_areas(axis, direction, wood_area, leaf_area)
-        return ((cd_wood * wood + cd_leaf * leaf_area) * drag
-                + pulse * (wood + leaf))[:, None] * direction, arrival, td
+        on_drag = cd_wood * wood + cd_leaf * leaf_area
+        on_pulse = wood + leaf
+        out = []
+        for t in times:
+            x = np.clip((t - arrival) / td, 0.0, 1.0)
+            # int_0^x (1-u) e^(-b u) du, and int_0^x (1-u)^2 e^(-2 b u) du
+            m0, m1, m2 = _moments(2 * self.decay, x, 2)
+            drag = qs * td * (m0 - 2 * m1 + m2)
+            p0, p1 = _moments(beta, x, 1)
+            pulse = ps * td * (p0 - p1)
+            out.append((on_drag * drag + pulse * on_pulse)[:, None] * direction)
+        return out, arrival, td
 
     def reach(self, threshold: float = 500.0) -> float:
         """Distance (m) beyond which the peak overpressure is below

@@ -163,8 +163,7 @@ class SceneLoads:
                 over = asked > MAX_ACCELERATION
                 blast[over] *= (MAX_ACCELERATION / asked[over])[:, None]
             else:
-                i0, arrival, duration = e.impulse(com, t_blast, *args)
-                i1, _, _ = e.impulse(com, t_blast + dt, *args)
+                (i0, i1), arrival, duration = e.impulses(com, (t_blast, t_blast + dt), *args)
                 if not i1.any():
                     continue
                 blast = (self._capped(i1, t_blast + dt - arrival, props.mass)
