@@ -124,6 +124,9 @@ class SimTree:
     cut: object | None = None  # scene CutSpec
     pulls: list = field(default_factory=list)  # scene PullSpecs on this tree
     active: bool = True
+    # (2B,) N m: its springs' prestress torques when not its own grown
+    # shape's (a tree that lost parts keeps its set: sim/pruning.py)
+    hold: np.ndarray | None = None
 
 
 @dataclass

@@ -61,6 +61,23 @@ def engine_for(reason: Reason, quality: Quality) -> Engine:
 
 
 @dataclass(frozen=True)
+class BrokenOff:
+    """What a tree handed back to the linear tier has lost: `standing` (B,)
+    which of its bones still stand on its roots; the others lie still, at
+    `quaternions` (B, 4) x y z w from rest and `pivots` (B, 3) m (rows of
+    standing bones unused), holding `energy` J (the audit's: gravity above
+    z = 0 and their springs); `hold` (2B,) N m, each hinge spring's
+    prestress torque, which the standing tree keeps (the wood keeps its
+    set, JointSpace.hold)."""
+
+    standing: np.ndarray
+    quaternions: np.ndarray
+    pivots: np.ndarray
+    energy: float
+    hold: np.ndarray
+
+
+@dataclass(frozen=True)
 class HandOff:
     """A tree leaving a tier at `time` s = `substep` pymunk substeps from
     t = 0 (the pymunk tier starts there; -1 where it has no meaning: a
@@ -72,7 +89,8 @@ class HandOff:
     the tree since the bake's start. `before_blast`: the tree as the blast
     under way found it (None: no blast under way): the next engine starts
     there (a nonlinear engine cannot take a blast's impulse half delivered).
-    `step_length` s: the linear tier's step (a tree coming back gets it)."""
+    `step_length` s: the linear tier's step (a tree coming back gets it).
+    `broken`: what a tree handed back has lost (None: nothing)."""
 
     tree: int  # index among the chunk's trees
     time: float
@@ -87,6 +105,7 @@ class HandOff:
     work: float = 0.0
     step_length: float = 0.0
     restart: HandOff | None = None
+    broken: BrokenOff | None = None
 
     def origin(self) -> HandOff:
         """The state the next engine starts from: `restart`, else here

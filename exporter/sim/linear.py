@@ -123,6 +123,9 @@ class LinearTier:
         hold = None if self.scene.prestress else np.zeros(2 * b.n)
         self.model = JointSpace(b, layout, self.loads.g, GAMMA * self.h, BETA * self.h * self.h,
                                 hold)
+        for k, t in enumerate(trees):  # a tree that lost parts keeps its springs' set
+            if t.hold is not None:
+                self.model.hold[2 * b.offsets[k]:2 * b.offsets[k + 1]] = t.hold
         n = self.model.n
         self._state = None
         self.q = q if len(q) else np.zeros(n)

@@ -133,8 +133,11 @@ def lod_notes(stats: dict[str, dict], reports: list[TierReport], returned: int) 
     if broke:
         notes.append(broke)
     if returned:
+        pruned = ref.get("returned_broken", 0) if ref else 0
         notes.append(f"trees came back to the linear tier {returned} time"
-                     f"{'s' if returned > 1 else ''}, back in its range")
+                     f"{'s' if returned > 1 else ''}, back in its range"
+                     + (f"; {pruned} of them without the parts that broke off, which lie "
+                        "where they came to rest" if pruned else ""))
     return notes
 
 

@@ -37,6 +37,7 @@ from .handoff import (
 )
 from .loads import SceneLoads
 from .projectiles import projectile_reaches
+from .pruning import BoneMap, pruned_tree, standing_start
 from .rules import HIT_FORCE_RATE, HIT_SUBSTEP_RATE
 
 
@@ -70,10 +71,13 @@ class TreeRecord:
     motion: TreeMotion | None = None
     spans: list[TierSpan] = field(default_factory=list)
     switches: list[Event] = field(default_factory=list)
+    bone_map: BoneMap | None = None  # once parts broke off: its runs' bones among the grown
 
     def take(self, m: TreeMotion, start: int, work_before: float, fps: float) -> None:
         """The frames from `start` on are m's; `work_before` J: the work
         done on the tree before m's engine took it (the audit goes on)."""
+        if self.bone_map is not None:
+            m = self.bone_map.grown(m, start)
         if self.motion is None:
             self.motion = m
             return
@@ -107,7 +111,8 @@ class Chunk:
 
     def __init__(self, trees: list[SimTree], scene: Scene, quality: Quality,
                  loads: SceneLoads, log=None, progress=None):
-        self.trees, self.scene, self.quality = trees, scene, quality
+        # (a copy: a tree that lost parts runs on as its standing part)
+        self.trees, self.scene, self.quality = list(trees), scene, quality
         self.loads = loads
         self.log = log or (lambda msg: None)
         self.progress = progress
@@ -212,6 +217,13 @@ class Chunk:
             f"{ho.detail} at {ho.time:.3f} s; taken from {start.time:.3f} s, "
             f"{ho.restart.detail}")
         self.work_before[i] = start.work
+        if ho.broken is not None:  # it runs on as its standing part
+            record = self.records[i]
+            if record.bone_map is None:
+                record.bone_map = BoneMap.whole(self.trees[i].rig.n_bones)
+            record.bone_map.lose(ho.broken)
+            self.trees[i] = pruned_tree(self.trees[i], ho.broken)
+            start = standing_start(start)
         if ho.reason is not Reason.BACK:
             self.records[i].switches.append(Event(start.time, self.trees[i].name, TIER, "",
                                                   f"to {engine.value}: {why}"))

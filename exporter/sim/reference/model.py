@@ -489,6 +489,14 @@ class ReferenceModels:
         bias = np.where(has, d.qfrc_bias[np.maximum(g.hinge_dof, 0)], 0.0)
         k = self.k[g.bones]
         ref = np.divide(bias, k, out=np.zeros_like(bias), where=k > 0)
+        tree_of = self.bone_tree[g.bones]
+        for ti in np.unique(tree_of):
+            hold = self.trees[ti].hold
+            if hold is not None:  # a tree that lost parts keeps its springs' set
+                rows = np.nonzero(tree_of == ti)[0]
+                local = g.bones[rows] - self.offsets[ti]
+                ref[rows] = np.divide(-hold.reshape(-1, 2)[local], k[rows],
+                                      out=np.zeros((len(rows), 2)), where=k[rows] > 0)
         self.springref[g.bones] = ref
         m.qpos_spring[g.hinge_qpos[has]] = ref[has]
         mujoco.mj_resetData(m, d)

@@ -72,6 +72,8 @@ def report(engine: ReferenceEngine) -> TierReport:
              "parts": st.parts, "limited": st.limited, "broken": st.broken,
              "clamped": st.clamped, "damping_scaled": st.damping_scaled, "split": st.split,
              "blast_split": st.blast_split, "first_limit": st.first_limit, "step": engine.h}
+    if st.returned_broken:  # (only where it happened: bakes without it keep their bytes)
+        stats["returned_broken"] = st.returned_broken
     if st.closest is not None:
         frac, tree, path, when = st.closest
         stats["closest_to_breaking"] = {"fraction": round(frac, 4), "tree": tree,

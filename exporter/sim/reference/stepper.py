@@ -33,10 +33,17 @@ from ..common import (
     tree_motion,
 )
 from ..events import TIER, Event
-from ..handoff import HandOff, Reason
+from ..handoff import BrokenOff, HandOff, Reason
 from ..loads import SceneLoads, meets
 from ..range import BACK_DETAIL, RETURN_DETAIL, ReturnWatch, in_return_range
-from ..rules import BLAST_RING, BLAST_STEP, MAX_SPIN, exact_decay, limb_damping
+from ..rules import (
+    BLAST_RING,
+    BLAST_STEP,
+    MAX_SPIN,
+    SETTLE_SPEED,
+    exact_decay,
+    limb_damping,
+)
 from .events import ReferenceEvents
 from .model import Group, ReferenceModels
 
@@ -68,6 +75,7 @@ class Stats:
     closest: tuple | None = None
     first_limit: tuple | None = None  # (tree, segment, time s, acceleration m/s^2)
     broken: int = 0
+    returned_broken: int = 0  # trees handed back without parts that broke off (pruning.py)
 
 
 class ReferenceEngine(ReferenceModels, ReferenceEvents):
@@ -274,21 +282,53 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
 
     def _back_in_range(self, t: float, h_linear: float) -> bool:
         """Whether the trees have been back in the linear range for
-        range.RETURN_WINDOW up to this frame (at t s): every joint holding
-        and none cut, no projectile, every blast's push past, and the pose
-        within range.in_return_range for a linear step of `h_linear` s."""
-        intact = not (not self.attached.all() or self.released or any(self.cut_state)
-                      or any(g.projectiles for g in self.groups)
-                      or not self.loads.blasts_passed(t, self.com[:self.n], self._axes(),
-                                                      self.props))
-        if intact:
-            n = self.n
+        range.RETURN_WINDOW up to this frame (at t s): standing on their
+        roots, none cut, no joint letting go, no projectile, every blast's
+        push past, what broke off lying still (below rules.SETTLE_SPEED),
+        and the standing bones' pose within range.in_return_range for a
+        linear step of `h_linear` s."""
+        n = self.n
+        fallen = self.piece_root[:n] >= 0
+        calm = not (self.released or any(self.cut_state)
+                    or not all(self.attached[self._roots(ti)].all()
+                               for ti in range(len(self.trees)))
+                    or any(g.projectiles for g in self.groups)
+                    or not self.loads.blasts_passed(t, self.com[:n], self._axes(), self.props))
+        if calm and fallen.any():
+            speed = np.maximum(np.abs(self.vcom[:n][fallen]).max(),
+                               np.abs(self.omega[:n][fallen]).max())
+            calm = bool(speed < SETTLE_SPEED)
+        if calm:
             moment = np.zeros(n)
             for g in self.groups:
                 moment[g.bones] = self._moments(g)
-            intact = in_return_range(self.bones, self.rot[:n], self._pivots(), *self._hinges(),
-                                     moment, h_linear)
-        return self.watch.update(intact)
+            calm = in_return_range(self.bones, self.rot[:n], self._pivots(), *self._hinges(),
+                                   moment, h_linear, ~fallen if fallen.any() else None)
+        return self.watch.update(calm)
+
+    def _broken_off(self, ti: int, f: int) -> BrokenOff | None:
+        """What tree ti, handed back at frame f, has lost (None: nothing):
+        its standing bones, the fallen ones' pose and energy there, and its
+        springs' prestress (handoff.BrokenOff)."""
+        lo, hi = int(self.offsets[ti]), int(self.offsets[ti + 1])
+        fallen = self.piece_root[lo:hi] >= 0
+        if not fallen.any():
+            return None
+        self.stats.returned_broken += 1
+        rows = np.arange(lo, hi)[fallen]
+        springs = 0.0
+        for g in self.groups:  # a fallen part's own joints still hold (debris models)
+            has = g.hinge_qpos >= 0
+            angle = np.where(has, g.data.qpos[np.maximum(g.hinge_qpos, 0)], 0.0)
+            eps = np.where(has, angle - self.springref[g.bones], 0.0)
+            mine = np.isin(g.bones, rows)
+            springs += float(0.5 * (self.k[g.bones][mine] * eps[mine] * eps[mine]).sum())
+        energy = float(bone_energy(self.mass[rows], self.model_inertia[rows], self.rot[rows],
+                                   self.com[rows], self.vcom[rows], self.omega[rows],
+                                   -self.loads.g[2]).sum()) + springs
+        hold = -(self.k[lo:hi] * self.springref[lo:hi]).reshape(-1)
+        return BrokenOff(~fallen, self.quats[f, lo:hi].copy(), self.pivots[f, lo:hi].copy(),
+                         energy, hold)
 
     def _hinges(self) -> tuple[np.ndarray, np.ndarray]:
         """The hinges' angles and rates (2B,), rad and rad/s from the grown
@@ -527,7 +567,8 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             self.events.extend(Event(t, tr.name, TIER, "", RETURN_DETAIL) for tr in self.trees)
             self.handed_back = [
                 HandOff(ti, t, -1, q[2 * lo:2 * hi], v[2 * lo:2 * hi], Reason.BACK,
-                        BACK_DETAIL, frame=f, work=float(self.ledger.work[f, ti]))
+                        BACK_DETAIL, frame=f, work=float(self.ledger.work[f, ti]),
+                        broken=self._broken_off(ti, f))
                 for ti, (lo, hi) in enumerate(zip(self.offsets[:-1], self.offsets[1:]))]
 
     def _end_step(self) -> None:
