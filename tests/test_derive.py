@@ -75,6 +75,21 @@ def test_memory_cap_is_a_clear_error():
                limits=Limits(max_bytes=1 << 20))
 
 
+def test_memory_estimate_counts_the_parameters_of_modules_carried_over():
+    """Modules built in earlier steps and copied since keep their parameters:
+    the estimate is the whole string's, not the step's new tuples' (it was
+    a third of it here)."""
+    from treebake.lsystem.derive import _BYTES_PER_MODULE, _BYTES_PER_PARAM
+
+    g = parse_grammar("axiom: A(0)\nA(x) -> A(x + 1)[B(x, x, x, x, x, x)]A(x + 2)\n")
+    out = derive(g, iterations=10).modules
+    held = len(out) * _BYTES_PER_MODULE + sum(len(p) for _, p in out) * _BYTES_PER_PARAM
+    assert sum(len(p) for sym, p in out if sym == "B") > 0.5 * sum(len(p) for _, p in out)
+    derive(g, iterations=10, limits=Limits(max_bytes=held))  # fits exactly
+    with pytest.raises(LimitError, match="at iteration 10"):
+        derive(g, iterations=10, limits=Limits(max_bytes=held - 1))
+
+
 def test_work_cap_stops_a_long_non_growing_derivation():
     with pytest.raises(LimitError, match="work limit"):
         derive(parse_grammar("axiom: A\nA -> B\nB -> A\n"), iterations=1000,

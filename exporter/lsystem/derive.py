@@ -117,11 +117,13 @@ class _Rewriter:
                     else (None, m.symbol, tuple(a.evaluate for a in m.args),
                           m.symbol in self.by_symbol)
                     for m in succ]
-        # the constant modules' parameters a successor's evaluation adds to the
-        # memory estimate: counted where it builds others, as new tuples
+        # the parameters of a successor's constant modules (each copy counted,
+        # though copies share one tuple: the estimate errs high)
         self.const_params = {key: sum(len(m[1]) for m, _, _, _ in mods if m is not None)
-                             if any(m is None for m, _, _, _ in mods) else 0
                              for key, mods in self.built.items()}
+        # parameters the current string holds, carried from step to step: a
+        # module copied unchanged keeps its own
+        self.params_held = sum(len(params) for _, params in grammar.axiom)
         # `%` can only come from the axiom or a successor: without one, no
         # step needs the cut's scan.
         self.cuts = (any(sym == "%" for sym, _ in grammar.axiom)
@@ -215,7 +217,7 @@ class _Rewriter:
         by_symbol, built, rng = self.by_symbol, self.built, self.rng
         const_params = self.const_params
         isfinite = math.isfinite
-        params_total = 0
+        params_total = self.params_held  # rewritten modules' go, their successors' come
         next_check = 4096
         copied = 0  # modules[copied:i] are still to be copied unchanged
         for i in rewritable:
@@ -245,7 +247,7 @@ class _Rewriter:
                             acc += pr
                             if r < acc:
                                 break
-                    params_total += const_params[(id(p), k)]
+                    params_total += const_params[(id(p), k)] - len(module[1])
                     for const, sym, evaluators, rewrites in built[(id(p), k)]:
                         if rewrites:
                             mark(len(out))
@@ -275,6 +277,8 @@ class _Rewriter:
         if self.cuts and any(sym == "%" for sym, _ in out):
             out = _cut(out)
             out_rewritable = self.rewritable(out)
+            params_total = sum(len(params) for _, params in out)
+        self.params_held = params_total
         return out, out_rewritable
 
     def _check(self, count: int, params: int, iteration: int) -> None:
