@@ -327,12 +327,17 @@ def bone_depths(parent: np.ndarray) -> np.ndarray:
     return depth
 
 
-def subtree_sums(parent: np.ndarray, depth: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Sum of `values` over each bone and all bones outboard of it (bones
-    at `depth`, bone_depths)."""
+def depth_levels(depth: np.ndarray) -> list[np.ndarray]:
+    """The bones at each depth (bone_depths), deepest first, roots left out:
+    the order in which sums outboard of each bone build up."""
+    return [np.nonzero(depth == d)[0] for d in range(int(depth.max(initial=0)), 0, -1)]
+
+
+def subtree_sums(parent: np.ndarray, levels: list[np.ndarray], values: np.ndarray) -> np.ndarray:
+    """Sum of `values` (B, ...) over each bone and all bones outboard of it
+    (`levels`: depth_levels of the bones' depths)."""
     out = np.array(values, dtype=float, copy=True)
-    for d in range(int(depth.max()) if len(parent) else 0, 0, -1):  # deepest first
-        idx = np.nonzero(depth == d)[0]
+    for idx in levels:
         np.add.at(out, parent[idx], out[idx])
     return out
 
@@ -372,8 +377,9 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
     pb = np.concatenate(pair_b)
     base = limb_parent_bone[pl]  # the fixed bone above the limb (-1 = ground)
     depth = rig.bone_depth
-    msum = subtree_sums(parent, depth, rig.mass)
-    mcsum = subtree_sums(parent, depth, rig.mass[:, None] * rig.com)
+    levels = depth_levels(depth)
+    msum = subtree_sums(parent, levels, rig.mass)
+    mcsum = subtree_sums(parent, levels, rig.mass[:, None] * rig.com)
     n_limbs = len(rig.limbs)
     directions = np.eye(3)
     first = np.asarray([limb.bones[0] for limb in rig.limbs])

@@ -36,9 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .rig import Rig, RigOptions, build_rig
+from .rig import Rig, RigOptions, build_rig, depth_levels
 from .scene_keys import BEAUFORT
-from .statics import StaticSolver, bone_levels, joint_moments, wind_forces
+from .statics import StaticSolver, joint_moments, wind_forces
 
 STATIC_MARGIN = 0.4  # most a joint's own-weight moment may use of its strength
 GUST = 2.0  # gust load factor on the mean wind's drag (sqrt(2) ~ 1.41 on speed)
@@ -196,7 +196,7 @@ def check(grammar: str | Path, seed: int | None = None, quality: str = "default"
     path = _grammar_path(grammar)
     rig = grown_rig(path, seed, quality)
     model = rig.model
-    levels = bone_levels(rig.bone_parent)
+    levels = depth_levels(rig.bone_depth)
     paths = model.segment_paths()
     seg = first_segments(rig)
     diameter = np.maximum(model.width[seg], rig.options.min_width)

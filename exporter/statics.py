@@ -13,34 +13,17 @@ import math
 import numpy as np
 
 from .forces import drag
-from .rig import GRAVITY, Rig
+from .rig import GRAVITY, Rig, depth_levels, subtree_sums
 
 SHEAR = 0.14  # power-law exponent of the mean wind profile (forces.Wind's default)
 REFERENCE_HEIGHT = 10.0  # m, where a wind speed is given
-
-
-def bone_levels(parent: np.ndarray) -> list[np.ndarray]:
-    """Bones grouped by depth in the tree, deepest first (roots excluded)."""
-    depth = np.zeros(len(parent), dtype=np.int64)
-    for b, p in enumerate(parent):  # parents come first
-        if p >= 0:
-            depth[b] = depth[p] + 1
-    return [np.nonzero(depth == d)[0] for d in range(int(depth.max(initial=0)), 0, -1)]
-
-
-def subtree_sums(parent: np.ndarray, levels: list[np.ndarray], values: np.ndarray) -> np.ndarray:
-    """Sum of `values` (B, ...) over each bone and everything it carries."""
-    out = np.array(values, dtype=float, copy=True)
-    for idx in levels:
-        np.add.at(out, parent[idx], out[idx])
-    return out
 
 
 def joint_moments(rig: Rig, forces: np.ndarray, levels: list[np.ndarray] | None = None
                   ) -> np.ndarray:
     """Bending moment (B, ..., 3) N m at each bone's joint of forces
     (B, ..., 3) N applied at the bones' centres of mass (rest pose)."""
-    levels = bone_levels(rig.bone_parent) if levels is None else levels
+    levels = depth_levels(rig.bone_depth) if levels is None else levels
     extra = (slice(None),) + (None,) * (forces.ndim - 2) + (slice(None),)
     total = subtree_sums(rig.bone_parent, levels, forces)
     turning = subtree_sums(rig.bone_parent, levels, np.cross(rig.com[extra], forces))
@@ -102,7 +85,7 @@ class StaticSolver:
 
     def __init__(self, rig: Rig, levels: list[np.ndarray] | None = None):
         self.rig = rig
-        levels = bone_levels(rig.bone_parent) if levels is None else levels
+        levels = depth_levels(rig.bone_depth) if levels is None else levels
         nb = rig.n_bones
         n = 2 * nb
         self.frame = frame = hinge_frame(rig)
