@@ -18,6 +18,7 @@ from treebake.scene import parse_scene
 from treebake.sim.pruning import pruned_rig
 from treebake.sim.rigging import rig_scene
 from treebake.sim.run import simulate, solver_kind
+from treebake.sway import segment_ends
 
 
 def blast_scene():
@@ -147,3 +148,34 @@ def test_the_set_a_standing_part_keeps_is_the_same_on_both_engines():
                        atol=1e-12)
     assert np.array_equal(LinearTier([kept], scene, scene.quality, loads, 1).model.hold,
                           0.5 * own)
+
+
+def test_a_standing_part_can_leave_again_and_break_on():
+    """After the return, a 45 m/s gust sends the standing sapling back to
+    the reference (its own rig and set): it breaks on there, only joints
+    that still stood break, and what fell first stays where it lay."""
+    scene = parse_scene({
+        "name": "blast-then-gust", "duration": 6.0, "fps": 24,
+        "tree": [{"grammar": str(grammars_folder() / "sapling.lsys"), "position": [9.0, 2.0]}],
+        "explosion": [{"position": [0.0, 0.0, 1.0], "time": 0.5, "charge": 10.0}],
+        "gust": [{"position": [{"time": 4.0, "value": [0.0, 2.0, 1.5]},
+                               {"time": 6.0, "value": [18.0, 2.0, 1.5]}],
+                  "speed": 45.0, "radius": 4.0, "profile": "bump"}]},
+        file="<broken hand-back, then a gust>")
+    bake = bake_scene(scene)
+    (tree,) = bake.trees
+    tiers = [e for e in tree.info["events"] if e["kind"] == "tier"]
+    assert [e["detail"][:12] for e in tiers] == ["to reference", "to linear: b", "to reference"]
+    back, left = tiers[1]["time"], tiers[2]["time"]
+    assert back < left
+    broke = [e for e in tree.info["events"] if e["kind"] == "broke"]
+    first = [e["segment"] for e in broke if e["time"] < back]
+    later = [e["segment"] for e in broke if e["time"] > left]
+    assert len(first) == 10 and later  # it broke on in the reference
+    assert len(set(first + later)) == len(first) + len(later)  # no joint broke twice
+    # what fell first (every segment outboard of a first break) lies still to the end
+    f_back = round(back * bake.fps)
+    ends = segment_ends(tree, np.arange(tree.n_segments))
+    still = np.all(ends[f_back:] == ends[f_back], axis=(0, 2))
+    assert still.sum() >= 10
+    assert bake.meta["energy"]["sapling"]["max_gain_fraction"] < 0.02
