@@ -398,8 +398,9 @@ def report_markdown(summary: list[dict], runs: list[Run], meta: dict,
               "segment's end, as % of the tree's height (a forest: the median over its trees); "
               "cost is CPU seconds per simulated second in this process, one core: the whole "
               "bake (a bake under 1 CPU s: the least of up to 5 runs, so no setting pays the "
-              "engine's first imports), and (in brackets) its solver alone. Settings: the planar LOD's quality "
-              "levels (the linear tier, the reference for trees that leave its range), the "
+              "engine's first imports), and (in brackets) its solver alone. Settings: the "
+              "planar LOD's quality levels (the linear tier, the reference for trees that "
+              "leave its range), the "
               "pymunk-only LOD of 0.1.0 (bones of 1/30 of the height), and the reference at "
               "coarse steps with the default level's merged bones or one bone per segment."),
              ""]
