@@ -295,9 +295,9 @@ def _moments(beta: np.ndarray | float, x: np.ndarray, k_max: int) -> list[np.nda
     exponential."""
     y = beta * x
     e = np.exp(-y)
-    out = [(1 - e) / beta, (1 - e * (1 + y)) / beta**2,
-           (2 - e * (y * y + 2 * y + 2)) / beta**3] if k_max == 2 else \
-        [(1 - e) / beta, (1 - e * (1 + y)) / beta**2]
+    out = [(1 - e) / beta, (1 - e * (1 + y)) / beta**2]
+    if k_max == 2:
+        out.append((2 - e * (y * y + 2 * y + 2)) / beta**3)
     return out
 
 

@@ -307,25 +307,15 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
         return self.watch.update(calm)
 
     def _broken_off(self, ti: int, f: int) -> BrokenOff | None:
-        """What tree ti, handed back at frame f, has lost (None: nothing):
-        its standing bones, the fallen ones' pose and energy there, and its
-        springs' prestress (handoff.BrokenOff)."""
+        """What tree ti, handed back at frame f (just recorded), has lost
+        (None: nothing): its standing bones, the fallen ones' pose and
+        energy there, and its springs' prestress (handoff.BrokenOff)."""
         lo, hi = int(self.offsets[ti]), int(self.offsets[ti + 1])
         fallen = self.piece_root[lo:hi] >= 0
         if not fallen.any():
             return None
         self.stats.returned_broken += 1
-        rows = np.arange(lo, hi)[fallen]
-        springs = 0.0
-        for g in self.groups:  # a fallen part's own joints still hold (debris models)
-            has = g.hinge_qpos >= 0
-            angle = np.where(has, g.data.qpos[np.maximum(g.hinge_qpos, 0)], 0.0)
-            eps = np.where(has, angle - self.springref[g.bones], 0.0)
-            mine = np.isin(g.bones, rows)
-            springs += float(0.5 * (self.k[g.bones][mine] * eps[mine] * eps[mine]).sum())
-        energy = float(bone_energy(self.mass[rows], self.model_inertia[rows], self.rot[rows],
-                                   self.com[rows], self.vcom[rows], self.omega[rows],
-                                   -self.loads.g[2]).sum()) + springs
+        energy = float(self.bone_energies[lo:hi][fallen].sum())  # as recorded at frame f
         hold = -(self.k[lo:hi] * self.springref[lo:hi]).reshape(-1)
         return BrokenOff(~fallen, self.quats[f, lo:hi].copy(), self.pivots[f, lo:hi].copy(),
                          energy, hold)
@@ -371,6 +361,7 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             springs[g.bones] = 0.5 * (self.k[g.bones] * eps * eps).sum(1)
         e = bone_energy(self.mass, self.model_inertia, self.rot, self.com[:n], self.vcom[:n],
                         self.omega[:n], -self.loads.g[2]) + springs
+        self.bone_energies = e  # J per bone at frame f (what broke off keeps its share)
         self.ledger.record(f, per_tree(e, self.bone_tree, len(self.trees)),
                            per_tree(self.load_work.pending(self.com[:n]), self.bone_tree,
                                     len(self.trees)))
