@@ -153,9 +153,17 @@ def test_tree_sums_and_factor_on_a_random_tree():
         level.append(lev)
         return out
 
-    for a in chain(-1, 0, 9)[1::2]:
+    trunk = chain(-1, 0, 9)
+    for a in trunk[1::2]:
         for b in chain(a, 1, int(rng.integers(1, 6)))[::2]:
             chain(b, 2, int(rng.integers(1, 4)))
+    # several chains on one bone: a whorl of five on the trunk (level 1),
+    # two side chains on one branch bone (level 2)
+    for _ in range(5):
+        chain(trunk[3], 1, 2)
+    twice = chain(trunk[6], 1, 3)[1]
+    chain(twice, 2, 2)
+    chain(twice, 2, 1)
     parent = np.array(parent)
     n = len(parent)
     chain_parent = np.array([parent[c[0]] for c in chains])
@@ -168,8 +176,12 @@ def test_tree_sums_and_factor_on_a_random_tree():
     for j in range(n - 1, -1, -1):
         if parent[j] >= 0:
             suf[:, parent[j]] += suf[:, j]
+    own = x.copy()  # within its own chain: the bones after it
+    for c in chains:
+        own[:, c] = np.cumsum(x[:, c][:, ::-1], axis=1)[:, ::-1]
     assert np.allclose(sums.prefix(x), pre)
     assert np.allclose(sums.suffix(x), suf)
+    assert np.allclose(sums.chain_suffix(x), own)
     depth = depths(parent)
     anc = ancestor_table(parent, depth)
     a = 0.1 * np.eye(n)
@@ -184,6 +196,30 @@ def test_tree_sums_and_factor_on_a_random_tree():
     factor = TreeFactor(parent, np.diag(a).copy(), lower, chains, np.array(level))
     b = rng.normal(size=n)
     assert np.allclose(factor.solve(b), np.linalg.solve(a, b))
+
+
+
+def test_tree_sums_add_a_bones_chains_in_np_add_at_order(monkeypatch):
+    """Chains that hang on one bone add onto it in rounds of distinct bones;
+    the sums are the bytes np.add.at gives, which adds them in the chains'
+    order (a bake's bytes do not depend on which path ran)."""
+    import treebake.sim.treesums as treesums
+
+    rng = np.random.default_rng(8)
+    parent = [-1, 0, 1, 2]  # a trunk of 4 bones; on bone 2, three twigs of 2 bones
+    chains, level = [np.arange(4)], [0]
+    for _ in range(3):
+        chains.append(np.array([len(parent), len(parent) + 1]))
+        level.append(1)
+        parent += [2, len(parent)]
+    chain_parent = np.array([-1, 2, 2, 2])
+    x = rng.normal(size=(64, len(parent)))  # 64 draws: the order shows in the last bits
+    rounds = ChainSums(chains, chain_parent, np.array(level), len(parent))
+    assert rounds.levels[1].rounds is not None and len(rounds.levels[1].rounds) == 3
+    monkeypatch.setattr(treesums, "MAX_ROUNDS", 0)
+    at = ChainSums(chains, chain_parent, np.array(level), len(parent))
+    assert at.levels[1].rounds is None
+    assert rounds.suffix(x).tobytes() == at.suffix(x).tobytes()
 
 
 def test_hinges_from_pose_inverts_the_exact_kinematics(js):
