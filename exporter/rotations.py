@@ -50,9 +50,13 @@ def rotation_rows(rho: np.ndarray) -> np.ndarray:
     t2 = x * x + y * y + z * z
     theta = np.sqrt(t2)
     small = theta < 1e-8
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - t2 / 6, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - t2 / 24, (1 - np.cos(safe)) / (safe * safe))
+    if small.any():
+        safe = np.where(small, 1.0, theta)
+        a = np.where(small, 1.0 - t2 / 6, np.sin(safe) / safe)
+        b = np.where(small, 0.5 - t2 / 24, (1 - np.cos(safe)) / (safe * safe))
+    else:  # the same values, without the series' work
+        a = np.sin(theta) / theta
+        b = (1 - np.cos(theta)) / (theta * theta)
     ax, ay, az = a * x, a * y, a * z
     bx = b * x
     by = b * y
@@ -93,8 +97,12 @@ def qrotate_rows(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b for vectors as rows (3, N)."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+    first = a[1] * b[2] - a[2] * b[1]
+    out = np.empty((3,) + first.shape, first.dtype)  # np.stack costs as much again
+    out[0] = first
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+    return out
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
