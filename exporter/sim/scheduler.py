@@ -178,14 +178,16 @@ class Chunk:
         if self.progress is not None:
             self.progress.start(run.engine, live, tier.first_frame)
         segment_frames = 0
+        segments = sum(self.trees[i].rig.model.n_segments for i in live)  # while `live` stays
         for f in range(tier.first_frame, self.last_frame + 1):
-            segment_frames += sum(self.trees[i].rig.model.n_segments for i in live)
+            segment_frames += segments
             left = tier.advance_to(f)
             if left:
                 out.append([ho.offset_work(self.work_before.get(run.trees[ho.tree], 0.0))
                             for ho in left])
                 gone = {run.trees[ho.tree] for ho in left}
                 live = [i for i in live if i not in gone]
+                segments = sum(self.trees[i].rig.model.n_segments for i in live)
             if self.progress is not None:
                 self.progress.tick(run.engine, live, f)
         return out, segment_frames
