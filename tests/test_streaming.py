@@ -133,6 +133,38 @@ def test_a_damaged_tree_in_a_lazy_bake_is_named_when_read(streamed, tmp_path):
         load_bake(bad)  # read whole: refused at once
 
 
+
+@pytest.mark.parametrize("array", [
+    np.zeros((241, 28, 3), np.float32), np.arange(7, dtype=np.int64), np.float64(2.5),
+    np.zeros((0, 3)), np.array([True, False]), np.frombuffer(b"{}", np.uint8),
+    np.array(["ab", "c"]), np.arange(6.0).reshape(2, 3).T, np.arange(6, dtype=">i4")],
+    ids=["motion", "ints", "scalar", "empty", "bools", "json", "text", "fortran", "big-endian"])
+def test_a_member_reads_as_numpy_reads_it(array):
+    """bake_file reads a member's .npy bytes itself (numpy parses every
+    header as a Python literal): the same dtype, shape and values, a
+    writable array, for the plain arrays a bake holds and any other
+    numpy writes (Fortran order: numpy's own reader)."""
+    import io
+
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, array, allow_pickle=False)
+    got = bake_file._npy(buf.getvalue())
+    want = np.lib.format.read_array(io.BytesIO(buf.getvalue()))
+    assert got.dtype == want.dtype and got.shape == want.shape
+    assert got.tobytes() == want.tobytes() and got.flags.writeable
+    with pytest.raises(ValueError):  # cut short: refused, never a short array
+        bake_file._npy(buf.getvalue()[:-1] if array.size else buf.getvalue() + b"x")
+
+
+def test_an_object_member_is_refused_not_unpickled():
+    import io
+
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(ValueError, match="pickle"):
+        bake_file._npy(buf.getvalue())
+
+
 def world_joints(path, load=True, times=(1, 7, 12)):
     """Every skeleton's joint world transforms at `times` (USD time codes),
     by skeleton prim path, from a stage opened with payloads loaded or not."""
