@@ -51,7 +51,8 @@ class TreeMeshes(Sequence[TreeMesh]):
         if self._last is None or self._last[0] != i:
             tree = self.bake.trees[i]
             broken = broken_joints(tree)
-            mesh = tree_mesh(tree, self.tree_options(i), broken)
+            info = dict(tree.info, name=tree.name)  # not read again from a stored bake
+            mesh = tree_mesh(tree, self.tree_options(i, info), broken)
             self.facts[i] = TreeFacts(
                 {"name": tree.name, "grammar": Path(str(tree.info.get("grammar", ""))).name,
                  "grammar_hash": tree.info.get("grammar_hash"), "seed": tree.info.get("seed"),
@@ -62,9 +63,10 @@ class TreeMeshes(Sequence[TreeMesh]):
             self._last = (i, mesh)
         return self._last[1]
 
-    def tree_options(self, i: int) -> MeshOptions:
-        """Tree i's mesh options: its detail level, its species' bark."""
-        info = tree_info(self.bake.trees, i)
+    def tree_options(self, i: int, info: dict | None = None) -> MeshOptions:
+        """Tree i's mesh options: its detail level, its species' bark
+        (`info`: tree i's, with its name; default: read from the bake)."""
+        info = tree_info(self.bake.trees, i) if info is None else info
         name = str(info.get("name"))
         bark = bark_material(info.get("grammar")) if self.species else self.opts.bark
         rgb = bark_colour(bark) if self.species else self.opts.bark_rgb
