@@ -386,7 +386,7 @@ class JointSpace:
         frame; their moments about each hinge add up along the limb."""
         l0, l1, l2 = self.lump
         rates = kin[6:12]
-        rel = rates - np.concatenate([rates, np.zeros((6, 1))], 1)[:, self.frame_row]
+        rel = rates - np.concatenate([rates, np.zeros((6, 1))], 1).take(self.frame_row, axis=1)
         w, lin = rel[0:3], rel[3:6]
         per_bone = np.empty((6, self.bones.n))
         per_bone[0:3] = turn_rows(l2, w) - cross_rows(l1, lin)
