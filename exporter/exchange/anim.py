@@ -153,13 +153,23 @@ def _spans(keep: np.ndarray, times: np.ndarray | None = None):
     return prev, nxt, t
 
 
+def _at_samples(values: np.ndarray, *samples: np.ndarray) -> list[np.ndarray]:
+    """values (C, F, D) at each channel's samples (C, F') of every index
+    array: take_along_axis's values, gathered as rows of one flat array
+    (several times faster)."""
+    C, F = values.shape[:2]
+    rows = values.reshape(C * F, -1)
+    base = (np.arange(C) * F)[:, None]
+    return [rows.take((base + s).ravel(), axis=0).reshape(s.shape + values.shape[2:])
+            for s in samples]
+
+
 def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool,
                  times: np.ndarray | None = None) -> np.ndarray:
     """Every sample (C, F, D) rebuilt from the kept keys as glTF's LINEAR
     interpolation does it (slerp for rotations)."""
     prev, nxt, t = _spans(keep, times)
-    va = np.take_along_axis(values, prev[..., None], axis=1)
-    vb = np.take_along_axis(values, nxt[..., None], axis=1)
+    va, vb = _at_samples(values, prev, nxt)
     if not rotation:
         return va + (vb - va) * t[..., None]
     return slerp(va, vb, t)
@@ -171,8 +181,7 @@ def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool,
     of both slerp's and component-wise (nlerp) interpolation's angle error:
     nlerp's error plus the angle between nlerp and slerp."""
     prev, nxt, t = _spans(keep, times)
-    va = np.take_along_axis(values, prev[..., None], axis=1)
-    vb = np.take_along_axis(values, nxt[..., None], axis=1)
+    va, vb = _at_samples(values, prev, nxt)
     if not rotation:
         return norm_last(va + (vb - va) * t[..., None] - values)
     d = dot_last(va, vb)
@@ -200,8 +209,7 @@ def _midpoint_errors(values: np.ndarray, rotation: bool,
         idx = np.arange(F)
         before = np.maximum.accumulate(np.where(allowed, idx, -1), axis=1)[:, :-2]
         after = np.minimum.accumulate(np.where(allowed, idx, F)[:, ::-1], axis=1)[:, ::-1][:, 2:]
-        a = np.take_along_axis(values, before[..., None], axis=1)
-        b = np.take_along_axis(values, after[..., None], axis=1)
+        a, b = _at_samples(values, before, after)
         at = idx.astype(np.float64) if times is None else np.asarray(times, np.float64)
         w = (at[1:-1] - at[before]) / (at[after] - at[before])
     if not rotation:
