@@ -193,6 +193,7 @@ def test_blender_imports_the_abc_with_the_bakes_transforms_on_every_frame(tmp_pa
     assert worst["base"] < 1e-3 and worst["tip"] < 1e-3 and worst["mesh"] < 1e-3, worst
 
 
+@pytest.mark.slow  # 29 s: two Blender renders (the .abc import is checked on every frame above)
 def test_blender_renders_the_abc_like_the_glb(tmp_path):
     """Workbench renders of one frame of the demo, imported once as the .abc
     (point caches, face-set materials given docs/formats.md's colours by

@@ -448,6 +448,7 @@ def test_a_blast_breaks_as_many_twigs_on_the_lod_as_on_the_reference(root, monke
         assert np.median(late) < 0.5e-3, (solver, sorted(late))  # the check: every 2 ms
 
 
+@pytest.mark.slow  # 34 s: the reference at 1/8000-1/32000 s
 def test_a_violent_blast_breaks_as_many_joints_with_its_loads_updated_every_substep(
         tmp_path, root, monkeypatch):
     """50 kg of TNT 3 m from the sapling (`bench/events.py`'s blast) uproots
