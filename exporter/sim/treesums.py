@@ -71,12 +71,7 @@ class ChainSums:
         acc = x.take(self.order, axis=1)
         out = np.empty_like(acc)
         for lev in reversed(self.levels):
-            block = acc[:, lev.rows]
-            run = block.cumsum(axis=1)
-            # from a bone to its chain's end: the run at the end - the run before the bone
-            tail = run.take(lev.last, axis=1).take(lev.row_chain, axis=1)
-            tail -= run
-            tail += block
+            tail = lev.to_chain_end(acc[:, lev.rows])
             out[:, lev.rows] = tail
             if lev.hangs:  # each chain's total onto the bone it hangs on
                 total = tail.take(lev.first, axis=1)
@@ -95,12 +90,7 @@ class ChainSums:
         src = x.take(self.order, axis=1)
         out = np.empty_like(src)
         for lev in self.levels:
-            block = src[:, lev.rows]
-            run = block.cumsum(axis=1)
-            tail = run.take(lev.last, axis=1).take(lev.row_chain, axis=1)
-            tail -= run
-            tail += block
-            out[:, lev.rows] = tail
+            out[:, lev.rows] = lev.to_chain_end(src[:, lev.rows])
         return out.take(self.position, axis=1)
 
 
@@ -120,6 +110,15 @@ class _Level:
     hangs: bool
     parent: np.ndarray
     rounds: tuple | None
+
+    def to_chain_end(self, block: np.ndarray) -> np.ndarray:
+        """(k, rows): each row's value plus those after it in its chain: the
+        run at the chain's end less the run before the row."""
+        run = block.cumsum(axis=1)
+        tail = run.take(self.last, axis=1).take(self.row_chain, axis=1)
+        tail -= run
+        tail += block
+        return tail
 
     @classmethod
     def of(cls, lo: int, hi: int, first: np.ndarray, last: np.ndarray, row_chain: np.ndarray,
