@@ -11,7 +11,7 @@ number of workers; zip timestamps are fixed.
 Memory follows one tree, not the shot: `BakeWriter` holds no tree once it
 is written, and `load_bake(path, lazy=True)` keeps the archive open and
 reads a tree when it is asked for (zip's directory gives random access to
-each member; `numpy.load` reads none until asked). The file appears under
+each member; `_npy` reads a member's array). The file appears under
 its name only once whole (fileio.atomic_path): a crash or a full disk
 leaves nothing that looks like a bake. Each member carries zip's CRC-32,
 checked as it is read.

@@ -282,8 +282,8 @@ class PymunkTier(ChainBuild, ChainKinematics, ChainForces, ChainEvents):
         """Each body's joint spring's energy (J; 0 where its spring is gone):
         k (eps^2) / 2 with eps = a.angle - b.angle - rest, the angle each
         spring pulls toward zero (pymunk's DampedRotarySpring), from the
-        angles just read (`state`; the anchor's is 0): reading them from
-        pymunk body by body cost a third of a frame's audit."""
+        angles just read (`state`; the anchor's is 0), not body by body
+        through pymunk's properties (170,000 reads in a 10 s palm bake)."""
         alive = np.fromiter((joint[SPRING] is not None for joint in self.joints), bool,
                             len(self.joints))
         angle = self.state[:, 2]
