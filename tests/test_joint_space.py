@@ -198,7 +198,6 @@ def test_tree_sums_and_factor_on_a_random_tree():
     assert np.allclose(factor.solve(b), np.linalg.solve(a, b))
 
 
-
 def test_tree_sums_add_a_bones_chains_in_np_add_at_order(monkeypatch):
     """Chains that hang on one bone add onto it in rounds of distinct bones;
     the sums are the bytes np.add.at gives, which adds them in the chains'

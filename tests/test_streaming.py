@@ -133,7 +133,6 @@ def test_a_damaged_tree_in_a_lazy_bake_is_named_when_read(streamed, tmp_path):
         load_bake(bad)  # read whole: refused at once
 
 
-
 @pytest.mark.parametrize("array", [
     np.zeros((241, 28, 3), np.float32), np.arange(7, dtype=np.int64), np.float64(2.5),
     np.zeros((0, 3)), np.array([True, False]), np.frombuffer(b"{}", np.uint8),
