@@ -47,8 +47,8 @@ def in_return_range(bones: Bones, rot: np.ndarray, pivot: np.ndarray, q: np.ndar
     strengths, tips clear of the ground (or no lower than they grew), no
     hinge turning more than RETURN_TURN in a step of `h` s. `standing` (B,)
     bool: only those bones are checked (the rest broke off; None: all)."""
-    b = slice(None) if standing is None else np.nonzero(standing)[0]
-    hinge = slice(None) if standing is None else np.stack([2 * b, 2 * b + 1], 1).ravel()
+    b = slice(None) if standing is None else standing
+    hinge = slice(None) if standing is None else np.repeat(standing, 2)  # as pruning.py's
     rot, pivot, q, v, moment = rot[b], pivot[b], q[hinge], v[hinge], moment[b]
     tip0, pivot0 = bones.tip0[b], bones.pivot0[b]
     cos = np.clip(0.5 * (np.trace(rot, axis1=1, axis2=2) - 1.0), -1.0, 1.0)
