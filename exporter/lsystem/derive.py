@@ -239,14 +239,7 @@ class _Rewriter:
                 try:
                     if p.condition is not None and not p.condition.evaluate(values, rng):
                         continue
-                    k = 0
-                    if len(p.probabilities) > 1:
-                        r = rng.random()
-                        acc = 0.0
-                        for k, pr in enumerate(p.probabilities):
-                            acc += pr
-                            if r < acc:
-                                break
+                    k = _pick(p.probabilities, rng) if len(p.probabilities) > 1 else 0
                     params_total += const_params[(id(p), k)] - len(module[1])
                     for const, sym, evaluators, rewrites in built[(id(p), k)]:
                         if rewrites:
@@ -332,3 +325,15 @@ def _cut(modules: list[Module]) -> list[Module]:
             depth -= 1
         out.append(m)
     return out
+
+
+def _pick(probabilities, rng) -> int:
+    """Which of a stochastic production's successors one draw of `rng`
+    picks (probabilities summing to 1; the last if rounding leaves r over)."""
+    r = rng.random()
+    acc = 0.0
+    for k, pr in enumerate(probabilities):
+        acc += pr
+        if r < acc:
+            return k
+    return k
