@@ -1,6 +1,7 @@
 """The reference's events: felling (cut, hinge, fall), joints breaking (at a
-check, or at a blast's substep), the parts they free, and fallen trees
-coming to rest.
+check, or at a blast's substep), the parts they free, fallen trees coming
+to rest, and thrown projectiles (held until launch; the work they do on the
+trees they touch, for the energy audit).
 
 A joint whose bending moment (hinge springs plus limit forces) passes its
 strength breaks (rules.past_strength): the bone and all it carries become a
@@ -34,7 +35,8 @@ LIMIT = int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT)
 
 
 class ReferenceEvents:
-    """Felling, breaking, free parts and rest (mixed into the reference engine)."""
+    """Felling, breaking, free parts, rest and projectiles (mixed into the
+    reference engine)."""
 
     def _moments(self, g: Group) -> np.ndarray:
         """Bending moment (N m) at each of the group's joints: the hinge
@@ -279,3 +281,43 @@ class ReferenceEvents:
                 self.settled[ti] = True
                 self.events.append(Event(t, self.trees[ti].name, AT_REST, "",
                                          "came to rest on the ground"))
+
+    def _projectile_work(self, g: Group) -> None:
+        """Energy the projectiles lose while touching a tree: the most that
+        tree can have got from them (the audit's work)."""
+        m, d = g.model, g.data
+        energy = np.zeros(len(g.proj_body))
+        for i, (body, dof) in enumerate(zip(g.proj_body, g.proj_dof)):
+            v = d.qvel[dof:dof + 6]
+            inertia = m.body_inertia[body]
+            energy[i] = (0.5 * m.body_mass[body] * (v[:3] @ v[:3])
+                         + 0.5 * (inertia * v[3:] * v[3:]).sum()
+                         - m.body_mass[body] * (self.loads.g @ d.xpos[body]))
+        last = getattr(self, "_proj_energy", None)
+        self._proj_energy = energy
+        if last is None:
+            return
+        bone_of_body = {int(b): int(bone) for b, bone in zip(g.body, g.bones)}
+        work = np.zeros(len(self.trees))
+        for c in d.contact[:d.ncon]:
+            b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+            for pb, other in ((b1, b2), (b2, b1)):
+                hit = np.nonzero(g.proj_body == pb)[0]
+                if len(hit) and other in bone_of_body:
+                    i = int(hit[0])
+                    ti = int(self.bone_tree[bone_of_body[other]])
+                    work[ti] = max(work[ti], last[i] - energy[i])
+        self.ledger.add_work(np.maximum(work, 0.0))
+
+    def _projectiles(self, g: Group, t: float, launched: np.ndarray) -> None:
+        """Hold projectiles still until their launch time, then throw them."""
+        d = g.data
+        for i, pr in enumerate(self.scene.projectiles):
+            if launched[i]:
+                continue
+            q, v = g.proj_qpos[i], g.proj_dof[i]
+            d.qpos[q:q + 7] = [*pr.position, 1.0, 0.0, 0.0, 0.0]
+            d.qvel[v:v + 6] = 0.0
+            if t >= pr.time:
+                d.qvel[v:v + 3] = pr.velocity
+                launched[i] = True
