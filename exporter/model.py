@@ -160,6 +160,24 @@ class TreeModel:
         wide = self.width[self.limbs[best].segments[0]] >= 0.5 * self.width[li.segments[-1]]
         return best if wide else -1
 
+    def axes(self) -> list[list[int]]:
+        """The limbs grouped into axes: a limb and its continuations, ordered
+        by first limb (so an axis's parent axis comes first)."""
+        children = self.limb_children()
+        taken = np.zeros(len(self.limbs), dtype=bool)
+        axes = []
+        for li in range(len(self.limbs)):
+            if taken[li] or not self.limbs[li].segments:
+                continue
+            axis = [li]
+            nxt = self.continuation(li, children)
+            while nxt >= 0 and not taken[nxt]:
+                axis.append(nxt)
+                nxt = self.continuation(nxt, children)
+            taken[axis] = True
+            axes.append(axis)
+        return axes
+
     def main_stem(self) -> list[int]:
         """Segments of the main stem from the ground up: the first root limb
         and its continuations."""

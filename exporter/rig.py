@@ -133,30 +133,9 @@ class Rig:
         return out
 
 
-def physics_chains(model: TreeModel) -> list[list[int]]:
-    """Model limbs grouped into chains: a limb and its continuations, so that
-    an axis that forks sympodially (oak, willow) bends as one chain; ordered
-    by first limb, so a chain's parent chain comes first."""
-    children = model.limb_children()
-    taken = np.zeros(len(model.limbs), dtype=bool)
-    chains = []
-    for li in range(len(model.limbs)):
-        if taken[li] or not model.limbs[li].segments:
-            continue
-        chain = [li]
-        nxt = model.continuation(li, children)
-        while nxt >= 0 and not taken[nxt]:
-            chain.append(nxt)
-            nxt = model.continuation(nxt, children)
-        taken[chain] = True
-        chains.append(chain)
-    return chains
-
-
-def _group_segments(model: TreeModel, opts: RigOptions,
-                    chains: list[list[int]]) -> list[list[list[int]]]:
-    """Per chain, the segments of each bone."""
-    lengths = model.seg_length
+def _group_segments(model: TreeModel, opts: RigOptions, chains: list[list[int]],
+                    lengths: np.ndarray) -> list[list[list[int]]]:
+    """Per chain, the segments of each bone (`lengths` (S,) m per segment)."""
     groups = []
     for chain in chains:
         bones: list[list[int]] = []
@@ -196,9 +175,10 @@ class _BoneSums:
 def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
     """Rig a TreeModel. Bones are ordered so that a parent precedes its children."""
     opts = options or RigOptions()
-    chains = physics_chains(model)
-    groups = _group_segments(model, opts, chains)
-    seg_bone = np.full(model.n_segments, -1, dtype=np.int64)
+    chains = model.axes()  # an axis that forks sympodially (oak, willow) bends as one chain
+    lengths = model.seg_length
+    groups = _group_segments(model, opts, chains, lengths)
+    seg_bone = np.full(len(lengths), -1, dtype=np.int64)
     bone_segs: list[list[int]] = []
     bone_limb: list[int] = []
     # Limbs are created parent-first by the turtle, so walking limbs in order
@@ -216,7 +196,7 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
     bone_parent = np.where(ps >= 0, seg_bone[np.maximum(ps, 0)], -1)
     pivot = model.points[model.seg_start[first]]
     tip = model.points[model.seg_end[last]]
-    sums = _bone_sums(model, opts, seg_bone, bone_segs)
+    sums = _bone_sums(model, opts, seg_bone, bone_segs, lengths)
 
     limbs = []
     for chain, bones in zip(chains, groups):
@@ -246,10 +226,10 @@ def build_rig(model: TreeModel, options: RigOptions | None = None) -> Rig:
 
 
 def _bone_sums(model: TreeModel, opts: RigOptions, seg_bone: np.ndarray,
-               bone_segs: list[list[int]]) -> _BoneSums:
-    """Mass, inertia, sizes and compliance of each bone from its segments:
-    solid cylinders of green wood plus leaf cards (see the module doc)."""
-    seg_len = model.seg_length
+               bone_segs: list[list[int]], seg_len: np.ndarray) -> _BoneSums:
+    """Mass, inertia, sizes and compliance of each bone from its segments
+    (`seg_len` (S,) m): solid cylinders of green wood plus leaf cards (see
+    the module doc)."""
     width = np.maximum(model.width, opts.min_width)
     area = np.pi / 4 * width**2
     seg_wood = model.density * area * seg_len
