@@ -9,9 +9,9 @@ from pathlib import Path
 
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
-from .resources import Budget, check_segments, count_segments
+from .resources import Budget, too_many_segments
 from .scene import Scene, TreeSpec
-from .turtle import interpret
+from .turtle import count_segments, interpret
 
 
 @dataclass
@@ -41,9 +41,10 @@ def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
     """Derive and interpret every tree of the scene, placed in the world.
     Identical (grammar, seed, iterations) are derived once. Every tree is
     derived and its segments counted against `budget` (resources.py)
-    before any is drawn: a tree too large is refused in about the time its
-    derivation takes."""
+    before any is drawn: a tree too large is refused in about the time the
+    derivations take."""
     budget = budget or Budget()
+    named = {spec.grammar: _as_named(spec.grammar, scene.file) for spec in scene.trees}
     grammars: dict[Path, object] = {}
     derived: dict[tuple, object] = {}
     for spec in scene.trees:
@@ -53,8 +54,11 @@ def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
         seed = g.seed if spec.seed is None else spec.seed
         key = (spec.grammar, seed, spec.iterations)
         if key not in derived:
-            d = derived[key] = derive(g, seed, spec.iterations)
-            check_segments(spec.grammar, count_segments(d.modules), budget)
+            derived[key] = derive(g, seed, spec.iterations)
+    for (grammar, _, _), d in derived.items():
+        segments = count_segments(d.modules)
+        if segments > budget.max_segments:
+            raise too_many_segments(grammar, segments, budget)
     cache: dict[tuple, TreeModel] = {}
     out = []
     for spec in scene.trees:
@@ -66,6 +70,6 @@ def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
             model = cache[key] = interpret(derived[key].modules, g, seed=seed)
         m = placed(model, spec.position, spec.rotation)
         m.name = spec.name
-        out.append(GrownTree(spec, m, g.source_hash, seed, _as_named(spec.grammar, scene.file),
-                             m.bounds(), m.height))
+        out.append(GrownTree(spec, m, g.source_hash, seed, named[spec.grammar], m.bounds(),
+                             m.height))
     return out

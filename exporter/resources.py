@@ -76,33 +76,14 @@ def parse_size(text: str) -> int:
     return int(float(m.group(1)) * 1024 ** " kmgt".index(m.group(2).lower() or " "))
 
 
-def count_segments(modules) -> int:
-    """The segments a derived string draws at most: its F modules (one of
-    zero length draws none), but for the twigs F draws after `@twig` up to
-    the end of its bracket (geometry only, no segment: the module caps
-    bound them)."""
-    count, twig, stack = 0, False, []
-    for sym, _ in modules:
-        if sym == "F":
-            count += not twig
-        elif sym == "[":
-            stack.append(twig)
-        elif sym == "]":
-            twig = stack.pop() if stack else False
-        elif sym == "@twig":
-            twig = True
-    return count
-
-
-def check_segments(grammar_file: str | Path, segments: int, budget: Budget) -> None:
-    """Refuse a tree of more segments than the budget allows, naming its
-    grammar, before the turtle draws it."""
-    if segments > budget.max_segments:
-        raise InputError(
-            f"{grammar_file}: the tree would have {segments:,} segments, more than the "
-            f"{budget.max_segments:,} a tree may have (about {mib(segments * MEMORY_PER_SEGMENT)} "
-            f"to grow and {mib(segments * DISK_PER_SEGMENT_FRAME)} per baked frame); fewer "
-            "`iterations` make it smaller, and `--max-segments` raises the cap")
+def too_many_segments(grammar_file: str | Path, segments: int, budget: Budget) -> InputError:
+    """The error for a tree of more segments than `budget` allows (its
+    max_segments), naming its grammar and what the tree would need."""
+    return InputError(
+        f"{grammar_file}: the tree would have {segments:,} segments, more than the "
+        f"{budget.max_segments:,} a tree may have (about {mib(segments * MEMORY_PER_SEGMENT)} "
+        f"to grow and {mib(segments * DISK_PER_SEGMENT_FRAME)} per baked frame); fewer "
+        "`iterations` make it smaller, and `--max-segments` raises the cap")
 
 
 def estimate(animated: int, static: int, frames: int, workers: int,

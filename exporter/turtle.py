@@ -134,6 +134,24 @@ class _Drawing:
     twig_rows: list[tuple] = field(default_factory=list)
 
 
+def count_segments(modules: Sequence[Module]) -> int:
+    """The segments a derived string draws at most: its F modules (one of
+    zero length draws none), but for the twigs F draws after `@twig` up to
+    the end of its bracket (geometry only, no segment: the module caps
+    bound them)."""
+    count, twig, stack = 0, False, []
+    for sym, _ in modules:
+        if sym == "F":
+            count += not twig
+        elif sym == "[":
+            stack.append(twig)
+        elif sym == "]":
+            twig = stack.pop() if stack else False
+        elif sym == "@twig":
+            twig = True
+    return count
+
+
 def interpret(modules: Sequence[Module], grammar: Grammar, name: str | None = None,
               seed: int | None = None) -> TreeModel:
     """Walk the module string and build the TreeModel (metres, Z up)."""

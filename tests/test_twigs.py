@@ -249,7 +249,7 @@ def test_previews_draw_the_twigs_where_their_segments_carry_them(baked):
 
 
 def test_twigs_do_not_count_against_the_segment_cap(tmp_path):
-    from treebake.resources import count_segments
+    from treebake.turtle import count_segments
 
     g = parse_grammar(TWIGGY, "t.lsys")
     assert count_segments(derive(g).modules) == model(TWIGGY).n_segments == 5
