@@ -11,14 +11,17 @@ from __future__ import annotations
 
 import math
 import time
+from bisect import bisect_right
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from itertools import accumulate
 
 import numpy as np
 
 from ..errors import GrammarError, LimitError
 from .expr import math_message
-from .grammar import MAX_ITERATIONS, Grammar, Module, Production
+from .grammar import Grammar, Module, Production
+from .settings import MAX_ITERATIONS
 
 DEFAULT_MAX_MODULES = 2_000_000
 DEFAULT_MAX_BYTES = 1 << 30  # 1 GiB, estimated
@@ -121,6 +124,9 @@ class _Rewriter:
         # though copies share one tuple: the estimate errs high)
         self.const_params = {key: sum(len(m[1]) for m, _, _, _ in mods if m is not None)
                              for key, mods in self.built.items()}
+        # each stochastic production's running sums of its probabilities
+        self.cumulative = {id(p): list(accumulate(p.probabilities))
+                           for p in grammar.productions}
         # parameters the current string holds, carried from step to step: a
         # module copied unchanged keeps its own
         self.params_held = sum(len(params) for _, params in grammar.axiom)
@@ -215,7 +221,7 @@ class _Rewriter:
         out_rewritable: list[int] = []
         append, extend, mark = out.append, out.extend, out_rewritable.append
         by_symbol, built, rng = self.by_symbol, self.built, self.rng
-        const_params = self.const_params
+        const_params, cumulative = self.const_params, self.cumulative
         isfinite = math.isfinite
         params_total = self.params_held  # rewritten modules' go, their successors' come
         next_check = 4096
@@ -239,7 +245,10 @@ class _Rewriter:
                 try:
                     if p.condition is not None and not p.condition.evaluate(values, rng):
                         continue
-                    k = _pick(p.probabilities, rng) if len(p.probabilities) > 1 else 0
+                    k = 0
+                    if len(p.probabilities) > 1:  # the first successor whose running sum passes r
+                        k = min(bisect_right(cumulative[id(p)], rng.random()),
+                                len(p.probabilities) - 1)
                     params_total += const_params[(id(p), k)] - len(module[1])
                     for const, sym, evaluators, rewrites in built[(id(p), k)]:
                         if rewrites:
@@ -326,14 +335,3 @@ def _cut(modules: list[Module]) -> list[Module]:
         out.append(m)
     return out
 
-
-def _pick(probabilities, rng) -> int:
-    """Which of a stochastic production's successors one draw of `rng`
-    picks (probabilities summing to 1; the last if rounding leaves r over)."""
-    r = rng.random()
-    acc = 0.0
-    for k, pr in enumerate(probabilities):
-        acc += pr
-        if r < acc:
-            return k
-    return k

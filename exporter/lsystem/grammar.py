@@ -10,16 +10,15 @@ typo) is a `GrammarWarning`, located the same way, on the grammar.
 from __future__ import annotations
 
 import hashlib
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import GrammarError
 from .expr import Expr, compile_expr, evaluate_constant
-from .settings import MAX_ITERATIONS, PHYSICS, SETTINGS, default, field_name  # noqa: F401
+from .settings import PHYSICS, SETTINGS, default, field_name, read_settings
 from .scan import RawModule, check_brackets, scan_modules
-from .toplevel import find_top, rfind_top, split_top
+from .toplevel import find_top, rfind_top
 
 Module = tuple[str, tuple[float, ...]]
 
@@ -136,7 +135,7 @@ class Grammar:
 # "w" is ABOP's omega typed on a keyboard)
 _HEADER_KEYS = {**{alias: field_name(k.name) for k in SETTINGS.values()
                    for alias in (k.name, *k.aliases)}, "w": "axiom"}
-_KEYS = {field_name(k.name): k for k in SETTINGS.values()}  # field name -> Key
+_PHYSICS_FIELDS = frozenset(field_name(k) for k in PHYSICS)
 
 
 def _strip_comment(line: str) -> str:
@@ -219,15 +218,14 @@ def parse_grammar(text: str, file: str = "<grammar>", name: str = "grammar") -> 
                 raise _err_at(file, lineno)(f"module name {nm!r} must be a letter followed by "
                                             "letters, digits or '_'", col + value.find(nm))
         declared = tuple(sorted(set(names), key=len, reverse=True))
-    settings = _settings(headers, constants, declared, file)
+    settings = read_settings(headers, constants, declared, file)
     if "axiom" not in headers:
         raise GrammarError("missing 'axiom: ...'", file, 1 if lines else 0, 1)
     axiom, written = _axiom(*headers["axiom"], constants, declared, file)
     productions, successors = _parse_productions(parts.productions, constants, declared, file)
     warnings = _arity_warnings([*written, *successors], productions, file)
 
-    physics_keys = {field_name(k) for k in PHYSICS}
-    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in physics_keys})
+    physics = PhysicsDefaults(**{k: float(v) for k, v in settings.items() if k in _PHYSICS_FIELDS})
     grammar_keys = {"iterations", "angle", "step", "width", "width_factor", "seed", "ignore",
                     "consider", "tropism", "elasticity", "scale", "width_scale", "leaves",
                     "description"}
@@ -291,47 +289,6 @@ def _sort_lines(lines: list[str], file: str) -> _FileParts:
         lead = len(value) - len(value.lstrip())
         headers[canonical] = (value.lstrip(), lineno, m.start(2) + lead)
     return parts
-
-
-def _settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, float],
-              declared: tuple[str, ...], file: str) -> dict:
-    """Field name -> value of every setting but axiom and modules, checked
-    against its range (units: lsystem/settings.py)."""
-    settings: dict = {}
-    for key, (value, lineno, col) in headers.items():
-        err = _err_at(file, lineno)
-        if key in ("name", "description"):
-            settings[key] = value.strip()
-        elif key in ("ignore", "consider"):
-            mods = scan_modules(value, col, declared, err)
-            if any(m.args for m in mods):
-                raise err(f"{key} lists symbols without parameters", col)
-            settings[key] = frozenset(m.symbol for m in mods)
-        elif key == "tropism":
-            parts = split_top(value, col)
-            if len(parts) != 3:
-                raise err("tropism needs three numbers: x, y, z (world frame, Z up)", col)
-            vec = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
-                        for t, c in parts)
-            if math.hypot(*vec) == 0:
-                raise err("tropism vector must not be zero", col)
-            settings[key] = vec
-        elif key in ("axiom", "modules"):
-            continue
-        else:
-            v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
-            spec = _KEYS[key]
-            if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi):
-                raise err(f"{spec.name} {spec.out_of_range(float(v))}", col)
-            if spec.kind == "integer":
-                if v != int(v):
-                    raise err(f"{spec.name} must be a whole number, got {v:g}", col)
-                v = int(v)
-            settings[key] = v
-    if "ignore" in settings and "consider" in settings:
-        _, lineno, col = headers["consider"]
-        raise _err_at(file, lineno)("use either 'ignore' or 'consider', not both", col)
-    return settings
 
 
 def _axiom(value: str, lineno: int, col: int, constants: dict[str, float],

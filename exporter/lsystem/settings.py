@@ -1,12 +1,17 @@
 """The grammar file's settings (`key: value` lines): meaning, unit, default
-and range in one table. grammar.py parses and checks by it, Grammar and
-PhysicsDefaults take their defaults from it, docs/grammar.md shows it."""
+and range in one table, and a file's values read and checked by it
+(read_settings). Grammar and PhysicsDefaults take their defaults from it,
+docs/grammar.md shows it."""
 
 from __future__ import annotations
 
 import math
 
+from ..errors import GrammarError
 from ..settings import Key, markdown, table
+from .expr import evaluate_constant
+from .scan import scan_modules
+from .toplevel import split_top
 
 MAX_ITERATIONS = 1000
 
@@ -77,3 +82,55 @@ def default(key: str):
 def grammar_tables() -> dict[str, str]:
     """The docs' tables (docs/grammar.md)."""
     return {"grammar": markdown(LSYSTEM), "grammar.physics": markdown(PHYSICS)}
+
+
+_KEYS = {field_name(k.name): k for k in SETTINGS.values()}  # field name -> Key
+
+
+def _err_at(file: str, lineno: int):
+    """`err(message, col)` for one line: a GrammarError at 0-based column col."""
+    return lambda message, col: GrammarError(message, file, lineno, col + 1)
+
+
+def read_settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, float],
+              declared: tuple[str, ...], file: str) -> dict:
+    """Field name -> value of every setting of a grammar file but axiom and
+    modules, checked against its range in the tables above. `headers`: key
+    -> (value text, line, 0-based column); `constants`: the defines' values;
+    `declared`: the multi-character module names; `file` for the errors
+    (GrammarError, naming file, line and column)."""
+    settings: dict = {}
+    for key, (value, lineno, col) in headers.items():
+        err = _err_at(file, lineno)
+        if key in ("name", "description"):
+            settings[key] = value.strip()
+        elif key in ("ignore", "consider"):
+            mods = scan_modules(value, col, declared, err)
+            if any(m.args for m in mods):
+                raise err(f"{key} lists symbols without parameters", col)
+            settings[key] = frozenset(m.symbol for m in mods)
+        elif key == "tropism":
+            parts = split_top(value, col)
+            if len(parts) != 3:
+                raise err("tropism needs three numbers: x, y, z (world frame, Z up)", col)
+            vec = tuple(evaluate_constant(t, constants, file=file, line=lineno, col=c)
+                        for t, c in parts)
+            if math.hypot(*vec) == 0:
+                raise err("tropism vector must not be zero", col)
+            settings[key] = vec
+        elif key in ("axiom", "modules"):
+            continue
+        else:
+            v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
+            spec = _KEYS[key]
+            if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi):
+                raise err(f"{spec.name} {spec.out_of_range(float(v))}", col)
+            if spec.kind == "integer":
+                if v != int(v):
+                    raise err(f"{spec.name} must be a whole number, got {v:g}", col)
+                v = int(v)
+            settings[key] = v
+    if "ignore" in settings and "consider" in settings:
+        _, lineno, col = headers["consider"]
+        raise _err_at(file, lineno)("use either 'ignore' or 'consider', not both", col)
+    return settings
