@@ -31,7 +31,6 @@ import numpy as np
 from .errors import InputError
 from .model import Twigs
 from .rotations import angle_between, qrotate
-from .versions import runtime_versions
 
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
 # degrees: a segment turning more than this between two frames is fast there;
@@ -197,6 +196,27 @@ class TreeStore:
         return [self._trees[i] for i in range(self.count)]
 
 
+@dataclass
+class TreeBaker:
+    """Makes a simulated tree's bake as soon as its motion is final
+    (sim.solver.TreeSink) and puts it in `store` (TreeStore or
+    bake_file.BakeWriter). `grown` and `rigs` are the scene's grown trees
+    and their rigs, in scene order; in a looping shot (`looping`, loop.Loop)
+    each tree is cut to the loop at its `phases` entry (s)."""
+
+    grown: Sequence
+    rigs: Sequence
+    store: object
+    looping: object = None
+    phases: Sequence[float] = ()
+
+    def __call__(self, index: int, motion, engines: str) -> None:
+        tree = moved_tree_bake(self.grown[index], self.rigs[index], motion, engines)
+        if self.looping is not None:  # the loop's frames, after the run-in
+            tree = self.looping.window(tree, self.phases[index])
+        self.store.add(index, tree)
+
+
 def grown_info(grown, rig) -> dict:
     """What made a tree (grammar, its hash, seed) and its rig's first
     frequency (Hz) and bones: every tree's bake info starts with these."""
@@ -219,11 +239,11 @@ def moved_tree_bake(grown, rig, motion, engines: str) -> TreeBake:
     return tree_bake_from_motion(grown.model, rig, motion, info)
 
 
-def bake_meta(scene, solver: str, rigged, result) -> dict:
-    """A bake's meta: what made it (the versions that decide its motion,
-    versions.py), the scene's settings, what culling left out, and the
-    solver's result's meta and notes (sim.solver.SolveResult)."""
-    versions = runtime_versions()
+def bake_meta(scene, solver: str, rigged, result, versions: dict) -> dict:
+    """A bake's meta: what made it (`versions`, those that decide its
+    motion: versions.runtime_versions), the scene's settings, what culling
+    left out, and the solver's result's meta and notes
+    (sim.solver.SolveResult)."""
     meta = {"tool": f"treebake {versions['treebake']}", "versions": versions,
             "scene": scene.name, "scene_hash": scene.source_hash, "fps": scene.fps,
             "duration": scene.duration, "seed": scene.seed, "solver": str(solver),

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import loop
-from .bake import Bake, TreeStore, bake_meta, moved_tree_bake, objects_bake, static_tree_bake
+from .bake import Bake, TreeBaker, TreeStore, bake_meta, objects_bake, static_tree_bake
 from .bake_file import BakeWriter, load_bake
 from .grow import grow
 from .quality import Quality
@@ -21,6 +21,7 @@ from .scene import Scene
 from .sim.rigging import rig_scene
 from .sim.run import segments_held, simulate, solver_kind
 from .sim.solver import SolveResult
+from .versions import runtime_versions
 
 
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
@@ -44,6 +45,7 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     (and the same bytes, saved or streamed), whatever `workers`."""
     started = time.perf_counter()
     kind = solver_kind(solver)  # before any work: a bake never switches engines silently
+    versions = runtime_versions()  # what makes the motion, as the bake starts
     scene = scene if quality is None else replace(scene, quality=quality)
     budget = budget or Budget()
     grown = grow(scene, budget)
@@ -69,19 +71,14 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             if not t.active:
                 store.add(i, static_tree_bake(g, t.rig, rigged.static.get(t.name,
                                                                           "not simulated")))
-
-        def take(i: int, motion, engines: str) -> None:
-            tree = moved_tree_bake(grown[i], rigged.trees[i].rig, motion, engines)
-            if looping is not None:  # the loop's frames, after the run-in
-                tree = looping.window(tree, scene.trees[i].phase)
-            store.add(i, tree)
-
+        take = TreeBaker(grown, [t.rig for t in rigged.trees], store, looping,
+                         [t.phase for t in scene.trees])
         result = SolveResult({})
         if any(t.active for t in rigged.trees):
             result = simulate(kind, rigged, run, workers, timestep, log, progress, scheduler,
                               on_tree=take)
             timing.update(result.timing)
-        meta, objects = bake_meta(scene, kind, rigged, result), objects_bake(result.objects)
+        objects, meta = objects_bake(result.objects), bake_meta(scene, kind, rigged, result, versions)
         if looping is not None:
             meta["loop"] = looping.meta()
             meta["notes"] = meta.get("notes", []) + looping.notes()

@@ -165,3 +165,28 @@ def audit_motions(motions: dict, fps: float) -> dict:
     work = np.stack([motions[n].work for n in names], 1)
     events = [e for n in names for e in motions[n].events]
     return summary(names, energy, work, fps, events)
+
+
+@dataclass
+class AuditedSink:
+    """A TreeSink (sim.solver) that audits each tree's motion as it comes
+    (its `energy` record by tree name, audit_motions at `fps` frames/s) and
+    keeps its `events`, then hands it to `on_tree`, or keeps it in `kept`
+    (by name, in the order they came) when there is none. `names`: the
+    rigged trees' names by index."""
+
+    names: list[str]
+    fps: float
+    on_tree: object = None
+    energy: dict = field(default_factory=dict)
+    events: dict = field(default_factory=dict)
+    kept: dict = field(default_factory=dict)
+
+    def __call__(self, index: int, motion, engines: str) -> None:
+        name = self.names[index]
+        self.energy.update(audit_motions({name: motion}, self.fps))
+        self.events[name] = motion.events
+        if self.on_tree is not None:
+            self.on_tree(index, motion, engines)
+        else:
+            self.kept[name] = motion

@@ -56,7 +56,7 @@ class SceneLoads:
         rng = np.random.default_rng(scene.seed)
         self.wind = None
         if scene.wind is not None and largest(scene.wind.speed) > 0:
-            w = scene.wind
+            w, period = scene.wind, loop.period(scene)
             if isinstance(w.direction, Keyed):
                 direction = w.direction
             else:
@@ -66,7 +66,7 @@ class SceneLoads:
                              w.length_scale, w.start, w.ramp, w.end)
             if extent is None:
                 extent = np.array([[-10.0, -10.0], [10.0, 10.0]])
-            self.wind.prepare(rng, scene.duration, extent, period=loop.period(scene))
+            self.wind.prepare(rng, scene.duration, extent, period=period)
         self.explosions = [Explosion(np.array(e.position), e.time, e.charge)
                            for e in scene.explosions]
         self.vortices = [Vortex(np.array(v.start if v.path is None else v.path.values[0]),

@@ -42,7 +42,6 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
     never sees (culling.py) and trees that no force reaches and start at
     rest (the prestress balances gravity). Trees the camera only ever sees
     from beyond `far` m get its `far_quality`."""
-    log = log or (lambda msg: None)
     box = [g.bounds for g in grown]  # (lo, hi) m per tree
     height = [max(g.height, 1e-3) for g in grown]
     seen, far = np.ones(len(grown), dtype=bool), np.zeros(len(grown), dtype=bool)
@@ -85,6 +84,8 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
         out.trees.append(SimTree(g.model.name, rig, q.planes, direction[i], cuts.get(i),
                                  pulls.get(i, []), active=bool(reached[i] and seen[i])))
         out.qualities.append(q)
+    if log is None:
+        return out
     if scene.camera is not None:
         c = out.culled
         log(f"culling: {c['unseen']} trees never in view, {c['far']} far "

@@ -7,7 +7,7 @@ from enum import StrEnum
 
 from ..errors import InputError
 from ..scene import Scene
-from .audit import audit_motions, gain_notes
+from .audit import AuditedSink, gain_notes
 from .events import summary
 from .rigging import RiggedScene
 from .solver import Solver, SolveResult, TreeSink
@@ -65,24 +65,14 @@ def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int =
     tree's motion goes there as soon as it is final (audited first) and the
     result keeps none: memory follows the chunk, not the shot."""
     log = log or (lambda msg: None)
-    energy, events, kept = {}, {}, {}
-
-    def audited(index: int, motion, engines: str) -> None:
-        name = rigged.trees[index].name
-        energy.update(audit_motions({name: motion}, scene.fps))
-        events[name] = motion.events
-        if on_tree is not None:
-            on_tree(index, motion, engines)
-        else:
-            kept[name] = motion
-
+    sink = AuditedSink([t.name for t in rigged.trees], scene.fps, on_tree)
     result = solver_for(kind, rigged, scene, workers, timestep, log, scheduler).run(progress,
-                                                                                   audited)
-    result.meta["energy"] = energy
-    result.notes = result.notes + gain_notes(energy)
+                                                                                   sink)
+    result.meta["energy"] = sink.energy
+    result.notes = result.notes + gain_notes(sink.energy)
     if on_tree is None:  # kept for the caller, in the order they came
-        result.motions = kept
-    for line in summary(events) + result.notes:
+        result.motions = sink.kept
+    for line in summary(sink.events) + result.notes:
         log(line)
     return result
 
