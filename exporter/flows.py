@@ -31,7 +31,6 @@ import numpy as np
 from .forces import AIR_DENSITY
 from .keys import Keyed, largest, value_at
 
-PROFILES = ("bump", "gaussian")
 TRAVEL_SPEED = 1.0  # m/s: below it a gust heading along its travel fades with the speed
 # The wall jet's layer: its peak at height JET_LAYER x sqrt(r^2 + R^2), the
 # value for which the jet's momentum flux beyond r ~ 2 R is the thrust

@@ -195,10 +195,6 @@ class Wind:
         self._pairs = np.concatenate([self._series[:-1], self._series[1:]], axis=2)
         self._dt = dt
 
-    def mean_speed(self, z: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Mean wind speed (m/s) at heights `z` (m) at time t (s)."""
-        return self._profile(z, value_at(self.speed, t))
-
     def _profile(self, z: np.ndarray, speed: float) -> np.ndarray:
         z = np.maximum(z, 0.5)
         return speed * (z / self.reference_height) ** self.shear

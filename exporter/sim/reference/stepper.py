@@ -442,7 +442,6 @@ class ReferenceEngine(ReferenceModels, ReferenceEvents):
             self.step = min(round(start / self.h), self.last_step)
             self._set_hinges(*state, self.step * self.h)
         self.envelopes_off_in_ground()
-        self.first_step = self.step
         self.first_frame = math.ceil(self.step / self.spf - 1e-9)
 
     def advance_to(self, frame: int) -> list[HandOff]:
