@@ -161,7 +161,12 @@ def bark_texture() -> Texture:
 
 
 def _shade(rgb: np.ndarray, k: float) -> tuple[int, int, int, int]:
-    return (*(int(v) for v in np.clip(np.round(rgb * k), 0, 255)), 255)
+    """The colour `rgb` (sRGB 0..255, float) scaled by k, rounded (half to
+    even, as numpy rounds) and clipped: an opaque RGBA fill. Plain Python:
+    it is called per leaf and needle, where numpy's per-call cost is most
+    of the time."""
+    r, g, b = (min(max(round(float(v) * k), 0), 255) for v in rgb)
+    return r, g, b, 255
 
 
 def _leaf_outline(x, y, length, width, angle, n=18) -> list[tuple[int, int]]:
