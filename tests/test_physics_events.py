@@ -658,8 +658,8 @@ def test_an_uprooted_stem_falls_as_a_rigid_rod_on_the_pymunk_tier(tmp_path):
 
 
 def test_a_box_into_a_sapling_at_draft_on_the_pymunk_tier_makes_no_energy(root):
-    """The same throw at `draft` without MuJoCo: the box's hits jolt the
-    stem, and its chains feel their frame's jolt one update later. At
+    """The same throw at `draft` with `nonlinear = "pymunk"`: the box's hits
+    jolt the stem, and its chains feel their frame's jolt one update later. At
     draft's 480 Hz (loads at 60 Hz) that made 3.5 % of the sapling's
     energy (the audit's bound is 2 %); the trees a projectile can reach now
     run at default's 960 Hz with loads at 120 Hz on the pymunk tier
