@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 from treebake.library import grammar_path
 from treebake.pipeline import bake_scene
 from treebake.scene import parse_scene
@@ -169,3 +170,27 @@ def test_broken_joints_split_the_skin():
     # one skin over tree and debris fails the same bound: the split is what keeps it
     assert (moved_w > 1.5 * rest_w + 0.05).any()
     assert moved_w.max() > 0.5  # stretched by metres, not millimetres
+
+
+@pytest.mark.parametrize("setting", ["default", "pymunk", "full"])
+def test_a_tree_without_events_keeps_every_joint(tmp_path, setting):
+    """broken_joints trusts a bake that records no event: no engine opens a
+    joint by more than BREAK_GAP unless something broke, was cut or
+    uprooted. Checked frame by frame (separated_joints) on an unbreakable
+    sapling in a gale, on the linear tier with the reference for large
+    motion, on the pymunk tier and on the full reference."""
+    from treebake.accuracy import PYMUNK, SCENARIOS, unbreakable
+    from treebake.exchange.mesh import separated_joints
+    from treebake.quality import QUALITIES
+
+    raw = {"duration": 3.0, "fps": 24, **SCENARIOS["gale"],
+           "tree": [{"grammar": str(unbreakable("sapling", tmp_path))}]}
+    quality = PYMUNK if setting == "pymunk" else QUALITIES["default"]
+    bake = bake_scene(parse_scene(raw, file="<gale>"), quality=quality,
+                      solver="full" if setting == "full" else "planar")
+    tree = bake.trees[0]
+    assert tree.info["events"] == [] and not tree.static
+    moved = np.linalg.norm(tree.positions[:, -1] - tree.positions[0, -1], axis=-1).max()
+    assert moved > 0.05  # the gale bends it: the joints are loaded
+    assert not separated_joints(tree).any()
+    assert not broken_joints(tree).any()

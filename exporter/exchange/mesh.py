@@ -159,10 +159,19 @@ def next_in_limb(tree: TreeBake) -> np.ndarray:
 
 def broken_joints(tree: TreeBake, gap: float = BREAK_GAP) -> np.ndarray:
     """(S,) bool: segment s separated from its parent at some frame (its base
-    moved more than `gap` m away from where the parent carries it)."""
+    moved more than `gap` m away from where the parent carries it). A tree
+    whose bake records no event (info["events"] empty: nothing broke, was
+    cut or uprooted) has none, and is not searched frame by frame."""
     out = np.zeros(tree.n_segments, dtype=bool)
-    if tree.static:
+    if tree.static or tree.info.get("events", None) == []:
         return out
+    return separated_joints(tree, gap)
+
+
+def separated_joints(tree: TreeBake, gap: float = BREAK_GAP) -> np.ndarray:
+    """(S,) bool: segment s's base more than `gap` m from where its parent
+    carries it at some frame, searched in every frame of a moved tree."""
+    out = np.zeros(tree.n_segments, dtype=bool)
     child = np.nonzero(tree.seg_parent >= 0)[0]
     if len(child) == 0:
         return out
