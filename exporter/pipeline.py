@@ -78,7 +78,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
             result = simulate(kind, rigged, run, workers, timestep, log, progress, scheduler,
                               on_tree=take)
             timing.update(result.timing)
-        objects, meta = objects_bake(result.objects), bake_meta(scene, kind, rigged, result, versions)
+        objects = objects_bake(result.objects)
+        meta = bake_meta(scene, kind, rigged, result, versions)
         if looping is not None:
             meta["loop"] = looping.meta()
             meta["notes"] = meta.get("notes", []) + looping.notes()
