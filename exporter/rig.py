@@ -40,6 +40,7 @@ import numpy as np
 
 from .errors import InputError
 from .model import TreeModel
+from .rotations import cross
 
 GRAVITY = 9.81  # m/s^2
 AIR_DENSITY = 1.2  # kg/m^3
@@ -322,11 +323,11 @@ def subtree_sums(parent: np.ndarray, levels: list[np.ndarray], values: np.ndarra
     return out
 
 
-def path_sums(parent: np.ndarray, a: np.ndarray, b: np.ndarray, depth: np.ndarray):
-    """Each bone's values plus those of every bone below it, for two arrays."""
+def path_sums(parent: np.ndarray, a: np.ndarray, b: np.ndarray, levels: list[np.ndarray]):
+    """Each bone's values plus those of every bone below it, for two arrays
+    (`levels`: depth_levels of the bones' depths)."""
     a, b = a.copy(), b.copy()
-    for d in range(1, int(depth.max()) + 1 if len(parent) else 0):  # root side first
-        idx = np.nonzero(depth == d)[0]
+    for idx in reversed(levels):  # root side first
         a[idx] += a[parent[idx]]
         b[idx] += b[parent[idx]]
     return a, b
@@ -369,14 +370,14 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
     omega2 = np.zeros((3, n_limbs))
     for di, direction in enumerate(directions):
         load = g * direction
-        moment = np.cross(mcsum - msum[:, None] * rig.pivot, load)  # N m at each joint
+        moment = cross(mcsum - msum[:, None] * rig.pivot, load)  # N m at each joint
         rho = moment / rig.k[:, None]  # joint rotation vectors, rad
         # sums down the tree: each bone's rotation and its points' offset term
-        a, bsum = path_sums(parent, rho, np.cross(rho, rig.pivot), depth)
+        a, bsum = path_sums(parent, rho, cross(rho, rig.pivot), levels)
         a_base = np.where(base[:, None] >= 0, a[np.maximum(base, 0)], 0.0)
         b_base = np.where(base[:, None] >= 0, bsum[np.maximum(base, 0)], 0.0)
         rot = a[pb] - a_base  # bone rotation relative to the fixed base
-        u = np.cross(rot, rig.com[pb]) - (bsum[pb] - b_base)  # COM displacement, m
+        u = cross(rot, rig.com[pb]) - (bsum[pb] - b_base)  # COM displacement, m
         m = rig.mass[pb]
         work = np.bincount(pl, m * (u @ load), minlength=n_limbs)
         kinetic = np.bincount(pl, m * (u * u).sum(1)
