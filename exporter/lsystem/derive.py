@@ -334,4 +334,3 @@ def _cut(modules: list[Module]) -> list[Module]:
             depth -= 1
         out.append(m)
     return out
-

@@ -87,21 +87,19 @@ def grammar_tables() -> dict[str, str]:
 _KEYS = {field_name(k.name): k for k in SETTINGS.values()}  # field name -> Key
 
 
-def _err_at(file: str, lineno: int):
-    """`err(message, col)` for one line: a GrammarError at 0-based column col."""
-    return lambda message, col: GrammarError(message, file, lineno, col + 1)
-
-
 def read_settings(headers: dict[str, tuple[str, int, int]], constants: dict[str, float],
-              declared: tuple[str, ...], file: str) -> dict:
+                  declared: tuple[str, ...], file: str) -> dict:
     """Field name -> value of every setting of a grammar file but axiom and
     modules, checked against its range in the tables above. `headers`: key
     -> (value text, line, 0-based column); `constants`: the defines' values;
     `declared`: the multi-character module names; `file` for the errors
     (GrammarError, naming file, line and column)."""
+    def at(lineno: int):  # err(message, col): a GrammarError at 0-based column col
+        return lambda message, col: GrammarError(message, file, lineno, col + 1)
+
     settings: dict = {}
     for key, (value, lineno, col) in headers.items():
-        err = _err_at(file, lineno)
+        err = at(lineno)
         if key in ("name", "description"):
             settings[key] = value.strip()
         elif key in ("ignore", "consider"):
@@ -132,5 +130,5 @@ def read_settings(headers: dict[str, tuple[str, int, int]], constants: dict[str,
             settings[key] = v
     if "ignore" in settings and "consider" in settings:
         _, lineno, col = headers["consider"]
-        raise _err_at(file, lineno)("use either 'ignore' or 'consider', not both", col)
+        raise at(lineno)("use either 'ignore' or 'consider', not both", col)
     return settings
