@@ -323,16 +323,6 @@ def subtree_sums(parent: np.ndarray, levels: list[np.ndarray], values: np.ndarra
     return out
 
 
-def path_sums(parent: np.ndarray, a: np.ndarray, b: np.ndarray, levels: list[np.ndarray]):
-    """Each bone's values plus those of every bone below it, for two arrays
-    (`levels`: depth_levels of the bones' depths)."""
-    a, b = a.copy(), b.copy()
-    for idx in reversed(levels):  # root side first
-        a[idx] += a[parent[idx]]
-        b[idx] += b[parent[idx]]
-    return a, b
-
-
 def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
     """First bending frequency (rad/s) of each limb with everything it
     carries, its base held fixed: the Rayleigh quotient on the static
@@ -372,8 +362,13 @@ def limb_frequencies(rig: Rig, g: float = GRAVITY) -> np.ndarray:
         load = g * direction
         moment = cross(mcsum - msum[:, None] * rig.pivot, load)  # N m at each joint
         rho = moment / rig.k[:, None]  # joint rotation vectors, rad
-        # sums down the tree: each bone's rotation and its points' offset term
-        a, bsum = path_sums(parent, rho, cross(rho, rig.pivot), levels)
+        # sums down the tree, root side first: each bone's rotation and its
+        # points' offset term, its own plus every bone's below it (rho is not
+        # used again: summed in place)
+        a, bsum = rho, cross(rho, rig.pivot)
+        for idx in reversed(levels):
+            a[idx] += a[parent[idx]]
+            bsum[idx] += bsum[parent[idx]]
         a_base = np.where(base[:, None] >= 0, a[np.maximum(base, 0)], 0.0)
         b_base = np.where(base[:, None] >= 0, bsum[np.maximum(base, 0)], 0.0)
         rot = a[pb] - a_base  # bone rotation relative to the fixed base
