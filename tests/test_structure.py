@@ -50,3 +50,16 @@ def test_no_import_circle():
     graph = flow.import_graph(flow.package_modules(treebake), "facade")
     circles = [c for c in flow.sccs(graph) if len(c) > 1]
     assert not circles, f"import circles: {circles}"
+
+
+def test_following_a_bakes_data_re_enters_modules_at_most_14_times():
+    """Issue 38's target for `bench/flow.py --entry treebake.pipeline:bake_scene
+    --scene preset:demo --duration 2` (its definition: the first-call walk
+    over modules, five calls deep), kept: 25 at 19d713a, 14 since."""
+    flow = _flow()
+    raw = flow.run_trace("treebake.pipeline:bake_scene", "preset:demo", 2.0, "planar", None, 1,
+                         [])
+    walk, _ = flow.walk(raw, "first-call", flow.DEFAULT_DEPTH)
+    layer = flow.layers(flow.import_graph(flow.package_modules(treebake), "facade"), "height")
+    measured = flow.measure(walk, layer)
+    assert measured["reentries"] <= 14, measured
