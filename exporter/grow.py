@@ -44,7 +44,7 @@ def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
     before any is drawn: a tree too large is refused in about the time the
     derivations take."""
     budget = budget or Budget()
-    named = {spec.grammar: _as_named(spec.grammar, scene.file) for spec in scene.trees}
+    named = {g: _as_named(g, scene.file) for g in dict.fromkeys(s.grammar for s in scene.trees)}
     grammars: dict[Path, object] = {}
     derived: dict[tuple, object] = {}
     for spec in scene.trees:
