@@ -40,6 +40,24 @@ def test_bake_round_trips_through_npz(root, tmp_path):
     assert "wall_seconds" not in back.meta  # timings vary: not part of the file
 
 
+def test_rotations_are_stored_and_the_rest_deflated_numpy_reads_both(root, tmp_path):
+    """docs/formats.md: a tree's rotations are stored as they are (they
+    deflate little, at a third of a large bake's CPU), every other entry
+    is deflated; numpy's own reader takes the file as it is."""
+    import zipfile
+
+    bake = bake_scene(short(root, "breeze"))
+    path = save_bake(bake, tmp_path / "b.npz")
+    kinds = {i.filename: i.compress_type for i in zipfile.ZipFile(path).infolist()}
+    stored = sorted(n for n, k in kinds.items() if k == zipfile.ZIP_STORED)
+    assert stored == [f"tree{i}.rotations.npy" for i in range(len(bake.trees))]
+    assert all(k == zipfile.ZIP_DEFLATED for n, k in kinds.items() if n not in stored)
+    with np.load(path) as npz:
+        for i, tree in enumerate(bake.trees):
+            np.testing.assert_array_equal(npz[f"tree{i}.rotations"], tree.rotations)
+            np.testing.assert_array_equal(npz[f"tree{i}.positions"], tree.positions)
+
+
 def test_rotations_are_unit_quaternions_and_positions_follow_the_chain(root):
     """On the pymunk tier, whose pivots are constraints that can open (the
     linear tier and the reference compose every pivot from its parent's, so
