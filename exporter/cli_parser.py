@@ -180,8 +180,8 @@ COMMANDS: tuple[Command, ...] = (
          opt("--seed", type=int, help="override the seed (default: the scene's)"),
          opt("--wind", type=float, help="wind speed at 10 m, m/s (grammar jobs: default 6.7)"),
          opt("--workers", type=int, default=None,
-             help="processes sharing the simulation (default: the machine's cores; the bake "
-                  "is the same with any number)"),
+             help="processes sharing the growing, rigging and simulation (default: the "
+                  "machine's cores; the bake is the same with any number)"),
          opt("--scheduler", metavar="ADDRESS",
              help="simulate the planar LOD's chunks on the Dask cluster at tcp://HOST:PORT "
                   "(pip install 'treebake[dask]'; the bake is the same as a local one)"),

@@ -7,6 +7,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from .forked import forked_map
 from .lsystem import derive, load_grammar
 from .model import TreeModel, placed
 from .resources import Budget, too_many_segments
@@ -37,38 +38,33 @@ def _as_named(grammar: Path, scene_file: str) -> str:
         return Path(grammar).name
 
 
-def grow(scene: Scene, budget: Budget | None = None) -> list[GrownTree]:
+def grow(scene: Scene, budget: Budget | None = None, workers: int = 1) -> list[GrownTree]:
     """Derive and interpret every tree of the scene, placed in the world.
-    Identical (grammar, seed, iterations) are derived once. Every tree is
+    Identical (grammar, seed, iterations) are grown once. Each tree is
     derived and its segments counted against `budget` (resources.py)
-    before any is drawn: a tree too large is refused in about the time the
-    derivations take."""
+    before it is drawn: a tree too large is refused in about the time its
+    derivation takes. `workers` processes share the trees (forked.py); the
+    trees are the same with any number."""
     budget = budget or Budget()
     named = {g: _as_named(g, scene.file) for g in dict.fromkeys(s.grammar for s in scene.trees)}
-    grammars: dict[Path, object] = {}
-    derived: dict[tuple, object] = {}
-    for spec in scene.trees:
-        g = grammars.get(spec.grammar)
-        if g is None:
-            g = grammars[spec.grammar] = load_grammar(spec.grammar)
-        seed = g.seed if spec.seed is None else spec.seed
-        key = (spec.grammar, seed, spec.iterations)
-        if key not in derived:
-            derived[key] = derive(g, seed, spec.iterations)
-    for (grammar, _, _), d in derived.items():
-        segments = count_segments(d.modules)
+    grammars = {g: load_grammar(g) for g in named}
+    seeds = [grammars[s.grammar].seed if s.seed is None else s.seed for s in scene.trees]
+    keys = list(dict.fromkeys((s.grammar, seed, s.iterations)
+                              for s, seed in zip(scene.trees, seeds)))
+
+    def grown(key: tuple) -> TreeModel:
+        grammar, seed, iterations = key
+        modules = derive(grammars[grammar], seed, iterations).modules
+        segments = count_segments(modules)
         if segments > budget.max_segments:
             raise too_many_segments(grammar, segments, budget)
-    cache: dict[tuple, TreeModel] = {}
+        return interpret(modules, grammars[grammar], seed=seed)
+
+    models = dict(zip(keys, forked_map(grown, keys, workers)))
     out = []
-    for spec in scene.trees:
+    for spec, seed in zip(scene.trees, seeds):
         g = grammars[spec.grammar]
-        seed = g.seed if spec.seed is None else spec.seed
-        key = (spec.grammar, seed, spec.iterations)
-        model = cache.get(key)
-        if model is None:
-            model = cache[key] = interpret(derived[key].modules, g, seed=seed)
-        m = placed(model, spec.position, spec.rotation)
+        m = placed(models[(spec.grammar, seed, spec.iterations)], spec.position, spec.rotation)
         m.name = spec.name
         out.append(GrownTree(spec, m, g.source_hash, seed, named[spec.grammar], m.bounds(),
                              m.height))

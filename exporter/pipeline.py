@@ -48,8 +48,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     versions = runtime_versions()  # what makes the motion, as the bake starts
     scene = scene if quality is None else replace(scene, quality=quality)
     budget = budget or Budget()
-    grown = grow(scene, budget)
-    rigged = rig_scene(scene, grown, quality, log)
+    grown = grow(scene, budget, workers)
+    rigged = rig_scene(scene, grown, quality, log, workers)
     looping = loop.plan(scene, [t.rig for t in rigged.trees if t.active],
                         scene.wind.ramp if scene.wind else 0.0)
     run = scene if looping is None else looping.sim_scene(scene)  # with the loop's run-in

@@ -8,9 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..forked import forked_map
 from ..grow import GrownTree
 from ..quality import QUALITIES, Quality
-from ..rig import RigOptions, build_rig
+from ..rig import Rig, RigOptions, build_rig
 from ..scene import Scene
 from .common import SimTree
 from .loads import SceneLoads
@@ -36,12 +37,13 @@ MARGIN = 20.0  # m around the trees where the wind's turbulence is synthesised
 
 
 def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = None,
-              log=None) -> RiggedScene:
+              log=None, workers: int = 1) -> RiggedScene:
     """Rig every tree, give it its quality (`quality` overrides every
     tree's), and decide which need simulating. Static: trees the camera
     never sees (culling.py) and trees that no force reaches and start at
     rest (the prestress balances gravity). Trees the camera only ever sees
-    from beyond `far` m get its `far_quality`."""
+    from beyond `far` m get its `far_quality`. `workers` processes share
+    the rigging (forked.py); the rigs are the same with any number."""
     box = [g.bounds for g in grown]  # (lo, hi) m per tree
     height = [max(g.height, 1e-3) for g in grown]
     seen, far = np.ones(len(grown), dtype=bool), np.zeros(len(grown), dtype=bool)
@@ -77,13 +79,22 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
         elif not reached[i]:
             out.static[g.model.name] = "no force reaches it (gravity is balanced by the prestress)"
             out.culled["no_force"] += 1
-        try:
-            rig = build_rig(g.model, RigOptions(min_bone_length=q.bone_length * height[i]))
-        except InputError as exc:  # a tree the rig cannot take: say whose grammar it is
-            raise InputError(f"{g.spec.grammar}: {exc}") from None
-        out.trees.append(SimTree(g.model.name, rig, q.planes, direction[i], cuts.get(i),
-                                 pulls.get(i, []), active=bool(reached[i] and seen[i])))
         out.qualities.append(q)
+
+    def rigged(i: int) -> Rig:
+        try:
+            rig = build_rig(grown[i].model, RigOptions(
+                min_bone_length=out.qualities[i].bone_length * height[i]))
+        except InputError as exc:  # a tree the rig cannot take: say whose grammar it is
+            raise InputError(f"{grown[i].spec.grammar}: {exc}") from None
+        rig.model = None  # the grown tree's, put back below: not sent back from a worker
+        return rig
+
+    for i, (g, rig) in enumerate(zip(grown, forked_map(rigged, range(len(grown)), workers))):
+        rig.model = g.model
+        out.trees.append(SimTree(g.model.name, rig, out.qualities[i].planes, direction[i],
+                                 cuts.get(i), pulls.get(i, []),
+                                 active=bool(reached[i] and seen[i])))
     if log is None:
         return out
     if scene.camera is not None:
