@@ -255,3 +255,20 @@ def test_a_scene_s_grammar_warnings_once_per_file_and_strict_before_any_work(typ
     assert main(["batch", str(jobs), "--out", str(tmp_path / "batch"), "--strict"]) == 2
     assert capsys.readouterr().err == f"treebake: error: {typo}:17:48: {TYPO}\n"
     assert not (tmp_path / "batch").exists()
+
+
+def test_the_eta_counts_from_the_first_report_not_the_stages_before(monkeypatch, capsys):
+    """A 10,000-tree bake grows and rigs for 12 s before its first report;
+    counted in, its first ETA read 1,966 s for a 96 s simulation."""
+    from treebake import cli_progress
+
+    clock = iter([0.0, 100.0, 100.0, 100.0, 110.0, 110.0, 110.0, 120.0, 120.0])
+    monkeypatch.setattr(cli_progress.time, "perf_counter", lambda: next(clock))
+    monkeypatch.setenv("TREEBAKE_PROGRESS_SECONDS", "0")
+    show = cli_progress.progress_bar("simulating")  # t = 0: the bar, before growing
+    show(0.0, 1.0)  # t = 100 s: the simulation starts
+    show(0.5, 1.0)  # t = 110 s: half done in 10 s
+    show(1.0, 1.0)  # t = 120 s
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == ["simulating: 0 %, estimating", "simulating: 50 %, 10 s left",
+                     "simulating: done in 20.0 s"]

@@ -37,6 +37,7 @@ class ChunkProgress:
         self.done = 0.0
         self.chunks = [ChunkPlan([trees[i] for i in members], q, scene, self)
                        for q, members in plan]
+        self.tell()  # nothing done yet: the simulation starts now
 
     @property
     def planned(self) -> float:
