@@ -4,7 +4,7 @@ before the simulation (grow, rig) that are the same work per tree: on a
 waited.
 
 The workers are forked after the function is set, so it may be a closure
-over data already in memory (grown trees, derived strings): only the items
+over data already in memory (grammars, grown trees): only the items
 go to the workers and only the results come back, pickled. Results come in
 the items' order and are the same values the function gives in one
 process, so what follows is the same bytes with any number of workers."""
