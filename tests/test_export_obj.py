@@ -107,3 +107,27 @@ def test_obj_sequence_is_byte_reproducible(tmp_path):
         assert pa.read_bytes() == pb.read_bytes(), pa.name
     header = a.files[1].read_text().splitlines()[0]
     assert not re.search(r"\d{4}-\d\d-\d\d|\d\d:\d\d", header), header  # no timestamps
+
+
+def test_a_sequence_the_disk_cannot_hold_is_refused_before_any_file(tmp_path, monkeypatch):
+    """A 1,000-tree forest's OBJ sequence is 62 GB: it filled a shared disk
+    frame by frame and left every frame it wrote. Now the first frame's
+    size times the frames is checked against the free disk first."""
+    import pytest
+    from treebake.errors import OutputError
+    from treebake.exchange import obj
+
+    bake = preset_bake("explosion")
+    meshes = [tree_mesh(t) for t in bake.trees]
+    full = export_obj(bake, meshes, tmp_path / "full", "job", stride=9)
+    frames = [p.stat().st_size for p in full.files if p.suffix == ".obj"]
+    # room for the whole sequence but 1 %: refused, naming what it needs
+    monkeypatch.setattr(obj, "free_disk", lambda folder: int(0.99 * len(frames) * frames[0]))
+    refused = rf"needs about .* \({len(frames)} frames of .*--stride, now 9"
+    with pytest.raises(OutputError, match=refused):
+        export_obj(bake, meshes, tmp_path / "refused", "job", stride=9)
+    assert not (tmp_path / "refused").exists() or not any((tmp_path / "refused").iterdir())
+    # the frames are within 1 % of the first frame's size: the estimate holds
+    assert max(frames) <= 1.01 * frames[0] and min(frames) >= 0.99 * frames[0]
+    monkeypatch.setattr(obj, "free_disk", lambda folder: int(1.02 * len(frames) * frames[0]))
+    assert len(export_obj(bake, meshes, tmp_path / "fits", "job", stride=9).frames) == len(frames)

@@ -18,7 +18,9 @@ import numpy as np
 
 from .. import __version__
 from ..bake import Bake
+from ..errors import OutputError
 from ..fileio import write_bytes
+from ..resources import free_disk, mib
 from .axes import points_y_up
 from .mesh import OBJECT_COLOUR, TreeMesh, object_mesh, pose, pose_rigid
 from .textures import TextureMap
@@ -120,10 +122,10 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             offset += mesh.n_vertices
     result = ObjResult()
     mtl = f"{name}.mtl"
-    result.files.append(write_bytes(out / mtl, mtl_text(materials, maps).encode("ascii")))
     frames = list(range(0, len(bake.times), stride))
     digits = frame_digits(frame_start + len(bake.times) - 1)
-    for done, f in enumerate(frames):
+
+    def frame_text(f: int) -> bytes:
         header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, "
                   f"frame {frame_start + f}, "
                   f"t = {float(bake.times[f]):.6f} s, metres, Y up\n")
@@ -135,12 +137,33 @@ def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
             p, n = pose_rigid(blk.mesh, bake.objects.positions[f, k].astype(np.float64),
                               bake.objects.rotations[f, k])
             parts.append(_object_text(blk, p, n))
+        return "".join(parts).encode("ascii")
+
+    first = frame_text(frames[0])
+    check_room(out, len(first), len(frames), stride)
+    result.files.append(write_bytes(out / mtl, mtl_text(materials, maps).encode("ascii")))
+    for done, f in enumerate(frames):
         path = out / f"{name}.{frame_start + f:0{digits}d}.obj"
-        result.files.append(write_bytes(path, "".join(parts).encode("ascii")))
+        result.files.append(write_bytes(path, first if done == 0 else frame_text(f)))
         result.frames.append(f)
         if progress is not None:
             progress(done + 1, len(frames))
     return result
+
+
+def check_room(out: Path, frame_bytes: int, frames: int, stride: int) -> None:
+    """Refuse (OutputError), before writing any of it, a sequence of
+    `frames` files of about `frame_bytes` each (the first frame's size:
+    every frame has the same vertices) that the free disk at `out` cannot
+    hold: a 1,000-tree forest's 241 frames are 62 GB."""
+    need = frame_bytes * frames
+    free = free_disk(out)
+    if free is not None and need > free:
+        raise OutputError(
+            f"{out}: the OBJ sequence needs about {mib(need)} ({frames} frames of "
+            f"{mib(frame_bytes)}) and the disk has {mib(free)} free; write every n-th "
+            f"frame (--stride, now {stride}), fewer trees, or glb/usd, which keep the motion "
+            "as animation")
 
 
 def _object_text(blk: _Block, positions: np.ndarray, normals: np.ndarray) -> str:
