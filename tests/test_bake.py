@@ -42,8 +42,8 @@ def test_bake_round_trips_through_npz(root, tmp_path):
 
 def test_rotations_are_stored_and_the_rest_deflated_numpy_reads_both(root, tmp_path):
     """docs/formats.md: a tree's rotations are stored as they are (they
-    deflate little, at a third of a large bake's CPU), every other entry
-    is deflated; numpy's own reader takes the file as it is."""
+    deflate little, for 2.3 ms of CPU a tree), every other entry is
+    deflated; numpy's own reader takes the file as it is."""
     import zipfile
 
     bake = bake_scene(short(root, "breeze"))
