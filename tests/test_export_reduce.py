@@ -59,3 +59,75 @@ def test_samples_are_gathered_as_take_along_axis_gathers_them():
         got = _at_samples(v, prev, inner)
         for idx, g in zip((prev, inner), got, strict=True):
             assert g.tobytes() == np.take_along_axis(v, idx[..., None], axis=1).tobytes()
+
+
+def _forest_motion(trees: int, frames: int, seed: int = 5):
+    """World motion of `trees` small random trees (chains with side
+    branches) swaying smoothly: parent, pos, rot, seg_vec, reach, group."""
+    from treebake.exchange.anim import depth_order, forward, subtree_reach
+
+    rng = np.random.default_rng(seed)
+    parents, group, n = [], [], 0
+    for g in range(trees):
+        size = int(rng.integers(3, 40))
+        p = np.array([-1] + [int(rng.integers(0, k)) for k in range(1, size)])
+        parents.append(np.where(p >= 0, p + n, -1))
+        group.append(np.full(size, g))
+        n += size
+    parent, group = np.concatenate(parents), np.concatenate(group)
+    seg_vec = rng.normal(0, 0.3, (n, 3)) + [0, 1, 0]
+    t_loc = np.where(parent[:, None] >= 0, seg_vec[np.maximum(parent, 0)], rng.normal(0, 5, (n, 3)))
+    t = np.linspace(0, 4, frames)[:, None, None]
+    axis = rng.normal(size=(1, n, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    angle = 0.2 * np.sin(rng.uniform(1, 6, (1, n, 1)) * t + rng.uniform(0, 6, (1, n, 1)))
+    angle = angle + rng.normal(0, 1e-3, angle.shape)  # some joints too noisy to reduce much
+    q_loc = np.concatenate([axis * np.sin(angle / 2), np.cos(angle / 2)], axis=-1)
+    pos, rot = forward(parent, depth_order(parent), np.broadcast_to(t_loc, (frames, n, 3)),
+                       q_loc)
+    reach = subtree_reach(parent, pos[0], pos[0] + seg_vec)
+    return parent, pos, rot, seg_vec, reach, group
+
+
+def test_a_forest_animated_in_pieces_is_the_forest_animated_at_once(monkeypatch):
+    """animate() cuts a forest into pieces of whole trees: every channel
+    (joint, frames, values), the rest pose, the report and each tree's
+    errors are those of the forest animated at once."""
+    import treebake.exchange.anim as anim
+
+    args = _forest_motion(trees=40, frames=60)
+    monkeypatch.setattr(anim, "PIECE_JOINTS", 10**9)
+    whole = anim.animate(*args[:5], ReduceOptions(), args[5])
+    monkeypatch.setattr(anim, "PIECE_JOINTS", 30)
+    assert len(anim._pieces(args[0], args[5])) > 10
+    cut = anim.animate(*args[:5], ReduceOptions(), args[5])
+    assert cut.report == whole.report and whole.report["trees_reduced"] == 40
+    assert whole.report["keys_written"] < whole.report["keys_full"] / 2  # reduced, not all kept
+    assert [(c.joint, c.path) for c in cut.channels] == [(c.joint, c.path) for c in whole.channels]
+    for a, b in zip(cut.channels, whole.channels):
+        assert np.array_equal(a.frames, b.frames) and np.array_equal(a.values, b.values)
+    assert np.array_equal(cut.translation, whole.translation)
+    assert np.array_equal(cut.rotation, whole.rotation)
+    for a, b in zip(cut.group_errors, whole.group_errors):
+        assert np.array_equal(a, b)
+
+
+def test_a_channel_with_one_key_holds_what_the_interpolation_rule_gives():
+    """_interpolate takes a one-key channel's value without interpolating:
+    bit for bit what the rule (lerp, slerp) gives for it, beside channels
+    that do interpolate."""
+    from treebake.exchange.anim import _interpolate, _interpolate_spans
+
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(6, 9, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q = q.astype(np.float32).astype(np.float64)  # as the file stores them: not quite unit
+    keep = np.zeros((6, 9), bool)
+    keep[:, 0] = True
+    keep[3:, [4, 8]] = True
+    v = rng.normal(size=(6, 9, 3))
+    v[0, 0, 1] = -0.0
+    for values, rotation in ((q, True), (v, False)):
+        got = _interpolate(values, keep, rotation)
+        want = _interpolate_spans(values, keep, rotation)
+        assert got.tobytes() == want.tobytes()

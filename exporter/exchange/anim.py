@@ -54,6 +54,10 @@ CONSTANT_ULPS = 2 * 2.0**-23
 CONSTANT_ANGLE = 1e-6  # rad
 MAX_HALVINGS = 8
 START_SCALE = 0.125  # local tolerance / world tolerance on the first try
+# trees are animated in pieces of about this many joints: a piece's arrays
+# (241 frames: 1.5 MB of quaternions) stay in the cache, which halves the
+# CPU of a forest's channels against all trees at once (bench/scale.py)
+PIECE_JOINTS = 200
 
 
 @dataclass(frozen=True)
@@ -167,7 +171,26 @@ def _at_samples(values: np.ndarray, *samples: np.ndarray) -> list[np.ndarray]:
 def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool,
                  times: np.ndarray | None = None) -> np.ndarray:
     """Every sample (C, F, D) rebuilt from the kept keys as glTF's LINEAR
-    interpolation does it (slerp for rotations)."""
+    interpolation does it (slerp for rotations). A channel with one key
+    holds it: taken without the interpolation (most channels of a tree:
+    its constant translations), the same values."""
+    held = keep.sum(axis=1) == 1
+    if not held.any():
+        return _interpolate_spans(values, keep, rotation, times)
+    first = values[held, keep[held].argmax(axis=1)][:, None]
+    out = np.empty_like(values)
+    # what the rule gives for a span of one key: slerp(q, q, 0) is q
+    # renormalised, a lerp is v + 0 (a -0.0 becomes 0.0)
+    out[held] = qnormalize(first) if rotation else first + 0.0
+    moving = ~held
+    if moving.any():
+        out[moving] = _interpolate_spans(values[moving], keep[moving], rotation, times)
+    return out
+
+
+def _interpolate_spans(values: np.ndarray, keep: np.ndarray, rotation: bool,
+                       times: np.ndarray | None = None) -> np.ndarray:
+    """_interpolate's rule on every channel: each sample from the keys around it."""
     prev, nxt, t = _spans(keep, times)
     va, vb = _at_samples(values, prev, nxt)
     if not rotation:
@@ -176,12 +199,29 @@ def _interpolate(values: np.ndarray, keep: np.ndarray, rotation: bool,
 
 
 def _errors(values: np.ndarray, keep: np.ndarray, rotation: bool,
-            times: np.ndarray | None = None) -> np.ndarray:
-    """(C, F) interpolation error at every sample. Rotations: an upper bound
-    of both slerp's and component-wise (nlerp) interpolation's angle error:
-    nlerp's error plus the angle between nlerp and slerp."""
+            times: np.ndarray | None = None, at: np.ndarray | None = None) -> np.ndarray:
+    """(C, F) interpolation error at every sample; with `at` (C, F) bool,
+    only at those samples (0 elsewhere). Rotations: an upper bound of both
+    slerp's and component-wise (nlerp) interpolation's angle error: nlerp's
+    error plus the angle between nlerp and slerp."""
     prev, nxt, t = _spans(keep, times)
-    va, vb = _at_samples(values, prev, nxt)
+    if at is None:
+        va, vb = _at_samples(values, prev, nxt)
+        return _span_errors(va, vb, values, t, rotation)
+    rows, cols = np.nonzero(at)
+    F = values.shape[1]
+    flat = values.reshape(-1, values.shape[2])
+    base = rows * F
+    err = np.zeros(at.shape)
+    err[rows, cols] = _span_errors(flat[base + prev[rows, cols]], flat[base + nxt[rows, cols]],
+                                   flat[base + cols], t[rows, cols], rotation)
+    return err
+
+
+def _span_errors(va: np.ndarray, vb: np.ndarray, values: np.ndarray, t: np.ndarray,
+                 rotation: bool) -> np.ndarray:
+    """The error of interpolating `values` (..., D) at fraction t (...)
+    between keys va and vb (..., D): m, or rad for rotations."""
     if not rotation:
         return norm_last(va + (vb - va) * t[..., None] - values)
     d = dot_last(va, vb)
@@ -237,9 +277,12 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
     if F > 2:
         keep[:, 1:-1] = _midpoint_errors(values, rotation, times, allowed) > tol[:, None]
     active = np.arange(C)
+    # a span that met the tolerance keeps its keys and its errors: each
+    # round measures only the samples of the spans that missed the last one
+    redo = None
     while len(active):
         k = keep[active]
-        err = _errors(values[active], k, rotation, times)
+        err = _errors(values[active], k, rotation, times, redo)
         err[k] = 0.0
         if allowed is not None:
             err[~allowed[active]] = 0.0
@@ -252,8 +295,10 @@ def reduce_keys(values: np.ndarray, tol: np.ndarray, rotation: bool,
         flat = err.ravel()
         span_max = np.maximum.reduceat(flat, np.flatnonzero(flat_keep))
         span_id = np.cumsum(flat_keep) - 1
-        add = (flat == span_max[span_id]) & (flat > np.repeat(tol[active], F))
+        limit = np.repeat(tol[active], F)
+        add = (flat == span_max[span_id]) & (flat > limit)
         keep[active] = k | add.reshape(k.shape)
+        redo = (span_max[span_id] > limit).reshape(k.shape)
     return keep
 
 
@@ -334,15 +379,76 @@ def animate(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray, seg_vec: np.nd
     merged with extra sub-frame samples); frames: the indices of the frames
     among them (default all), where the world errors are measured; allowed
     (F, J) bool: the samples each joint's channels may keep (default all;
-    every frame must be). Channel `frames` index the samples."""
+    every frame must be). Channel `frames` index the samples.
+
+    Trees are independent: they are animated in pieces of whole trees of
+    about PIECE_JOINTS joints, and the pieces' channels and reports merged
+    (the same values as one piece)."""
+    J = pos.shape[1]
+    group = np.zeros(J, np.int64) if group is None else np.asarray(group, np.int64)
+    pieces = _pieces(parent, group)
+    if len(pieces) == 1:
+        return _animate_piece(parent, pos, rot, seg_vec, reach, opts, group, times, frames,
+                              allowed)
+    parts = []
+    for a, b in pieces:
+        parts.append(_animate_piece(
+            np.where(parent[a:b] >= 0, parent[a:b] - a, -1), pos[:, a:b], rot[:, a:b],
+            seg_vec[a:b], reach[a:b], opts, group[a:b] - group[a], times, frames,
+            None if allowed is None else allowed[:, a:b]))
+    return _merged(parts, [a for a, _ in pieces])
+
+
+def _pieces(parent: np.ndarray, group: np.ndarray) -> list[tuple[int, int]]:
+    """Joint ranges [a, b) of whole trees, about PIECE_JOINTS joints each;
+    one range unless the trees are numbered 0, 1, ... in the joints' order
+    and every parent lies in its joint's piece."""
+    J = len(group)
+    step = np.diff(group)
+    if J == 0 or group[0] != 0 or ((step != 0) & (step != 1)).any():
+        return [(0, J)]
+    cuts = _chunks(np.arange(J), group, PIECE_JOINTS)
+    ranges = [(int(c[0]), int(c[-1]) + 1) for c in cuts]
+    start = np.repeat([a for a, _ in ranges], [b - a for a, b in ranges])
+    if ((parent >= 0) & (parent < start)).any():
+        return [(0, J)]
+    return ranges
+
+
+def _merged(parts: list[Animation], starts: list[int]) -> Animation:
+    """One Animation from pieces whose joints start at `starts`: channels
+    renumbered, report counts added, worst errors the worst of the pieces."""
+    channels = []
+    for part, start in zip(parts, starts):
+        for c in part.channels:
+            c.joint += start
+        channels += part.channels
+    report = dict(parts[0].report)
+    for part in parts[1:]:
+        for key, value in part.report.items():
+            if key.startswith("max_"):
+                report[key] = max(report[key], value)
+            elif key != "frames":  # every piece has the same frames
+                report[key] += value
+    return Animation(np.concatenate([p.translation for p in parts]),
+                     np.concatenate([p.rotation for p in parts]), channels, report,
+                     tuple(np.concatenate([p.group_errors[k] for p in parts]) for k in (0, 1)))
+
+
+def _animate_piece(parent: np.ndarray, pos: np.ndarray, rot: np.ndarray,
+                   seg_vec: np.ndarray, reach: np.ndarray, opts: ReduceOptions,
+                   group: np.ndarray, times: np.ndarray | None, frames: np.ndarray | None,
+                   allowed: np.ndarray | None) -> Animation:
+    """animate() for one piece of whole trees (its joints numbered from 0)."""
     F, J = pos.shape[:2]
     at = None if frames is None else np.asarray(frames, np.int64)
+    if at is not None and len(at) == F and (at == np.arange(F)).all():
+        at = None  # every sample is a frame: no copies of the samples at the frames
     is_frame = np.ones(F, bool)
     if at is not None:
         is_frame[:] = False
         is_frame[at] = True
     ok = None if allowed is None or allowed.all() else np.ascontiguousarray(allowed.T)
-    group = np.zeros(J, np.int64) if group is None else np.asarray(group, np.int64)
     G = int(group.max(initial=-1)) + 1
     pos = pos.astype(np.float64)
     rot = continuous(qnormalize(rot.astype(np.float64)), axis=0)
