@@ -21,6 +21,7 @@ from .exchange.anim import ReduceOptions
 from .exchange.textures import TextureMap
 from .exchange.mesh import DETAIL, MeshOptions, TreeMesh, part_materials_of
 from .fileio import atomic_path, write_bytes, write_text
+from .heap import keep_heap_top
 from .tree_meshes import TreeFacts, TreeMeshes
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")
@@ -252,6 +253,7 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     check_options(opts)
     if not opts.formats:
         raise InputError("no export format given")
+    keep_heap_top()  # fewer page faults (heap.py)
     if not bake.trees:
         raise InputError("the bake has no trees")
     if not isinstance(bake.trees, StoredTrees):  # a stored tree is checked as it is read

@@ -23,6 +23,7 @@ from .bake_file import load_bake
 from .exchange.gltf import GltfFile, GltfSettings, GltfWritten, write_gltf_file
 from .exchange.mesh import MeshOptions
 from .exchange.usd import LayerSpec, LayerTask, TreeLayer, write_tree_layer
+from .heap import keep_heap_top
 from .tree_meshes import TreeFacts, TreeMeshes
 
 MIN_TREES_PER_WORKER = 50  # fewer trees a worker is not worth its start (about 1 s)
@@ -52,6 +53,7 @@ _STATE: dict = {}  # a worker's bake and meshes, opened once (the pool's initial
 
 
 def _open(source: MeshSource) -> None:
+    keep_heap_top()
     bake = load_bake(source.bake_path, lazy=True)
     _STATE["meshes"] = TreeMeshes(bake, source.opts, source.detail, source.detail_trees,
                                   source.species)
