@@ -131,3 +131,27 @@ def test_a_channel_with_one_key_holds_what_the_interpolation_rule_gives():
         got = _interpolate(values, keep, rotation)
         want = _interpolate_spans(values, keep, rotation)
         assert got.tobytes() == want.tobytes()
+
+
+def test_written_rotation_keys_stay_continuous_across_dropped_samples():
+    """A joint that turns 170 degrees between kept keys (a sub-frame sample
+    between them dropped) has keys whose quaternions would change
+    hemisphere: the written keys are flipped back to a non-negative dot,
+    each still the same rotation; a joint with no such jump is written as
+    it is."""
+    from treebake.exchange.anim import _channels
+
+    turn = np.radians([0.0, 170.0, 340.0])
+    spin = np.stack([np.zeros(3), np.zeros(3), np.sin(turn / 2), np.cos(turn / 2)], 1)
+    still = np.tile([0.0, 0.6, 0.0, 0.8], (3, 1))
+    q_loc = np.stack([spin, still], axis=1)  # (F, J, 4); consecutive samples continuous
+    assert ((q_loc[1:] * q_loc[:-1]).sum(-1) > 0).all()
+    keep = np.array([[True, False, True], [True, True, True]])
+    const = np.array([False, False])
+    chans = _channels(np.zeros((3, 2, 3)), q_loc, keep, keep, ~const, const)
+    assert [(c.joint, c.path) for c in chans] == [(0, "rotation"), (1, "rotation")]
+    v = chans[0].values.astype(np.float64)
+    assert np.array_equal(chans[0].frames, [0, 2])
+    assert (v[1] * v[0]).sum() > 0
+    assert np.allclose(v, spin[[0, 2]] * [[1], [-1]], atol=1e-7)
+    assert np.array_equal(chans[1].values, still.astype(np.float32))

@@ -537,13 +537,37 @@ def _channels(t_loc: np.ndarray, q_loc: np.ndarray, keep_t: np.ndarray, keep_q: 
               const_t: np.ndarray, const_q: np.ndarray) -> list[Channel]:
     """Each joint's translation (m) and rotation (x y z w) channel at its kept
     samples, float32; constant channels are left out."""
+    t_keys = _keys(t_loc, keep_t & ~const_t[:, None])
+    q_keys = _keys(q_loc, keep_q & ~const_q[:, None])
+    # kept keys, not just frames, stay continuous: a channel whose keys
+    # change hemisphere (rare: q_loc is continuous frame to frame) is flipped
+    rows, _, q, _ = q_keys
+    same = rows[1:] == rows[:-1]
+    flips = set(rows[1:][same & ((q[1:] * q[:-1]).sum(-1) < 0)].tolist())
     channels = []
     for j in range(t_loc.shape[1]):
         if not const_t[j]:
-            fr = np.flatnonzero(keep_t[j])
-            channels.append(Channel(j, "translation", fr, t_loc[fr, j].astype(np.float32)))
+            fr, values = _channel_keys(t_keys, j)
+            channels.append(Channel(j, "translation", fr, values.astype(np.float32)))
         if not const_q[j]:
-            fr = np.flatnonzero(keep_q[j])
-            q = continuous(q_loc[fr, j], axis=0)  # kept keys, not just frames, stay continuous
-            channels.append(Channel(j, "rotation", fr, q.astype(np.float32)))
+            fr, values = _channel_keys(q_keys, j)
+            if j in flips:
+                values = continuous(values, axis=0)
+            channels.append(Channel(j, "rotation", fr, values.astype(np.float32)))
     return channels
+
+
+def _keys(values: np.ndarray, keep: np.ndarray):
+    """The kept samples of every channel at once: joint and sample indices
+    (joint by joint, samples increasing), their values (N, D), and where
+    each joint's keys start (J + 1,)."""
+    rows, frames = np.nonzero(keep)
+    starts = np.searchsorted(rows, np.arange(keep.shape[0] + 1))
+    return rows, frames, values[frames, rows], starts
+
+
+def _channel_keys(keys, j: int) -> tuple[np.ndarray, np.ndarray]:
+    """Joint j's kept samples and values from _keys."""
+    _, frames, values, starts = keys
+    a, b = starts[j], starts[j + 1]
+    return frames[a:b], values[a:b]
