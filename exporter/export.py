@@ -335,7 +335,7 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
         if fmt in opts.formats:
             from .exchange.gltf import export_gltf
 
-            job.tick(fmt, 0, 1)
+            job.tick(fmt, 0, len(job.bake.trees))
             per_file = opts.trees_per_file
             if per_file is None and len(job.bake.trees) > GLTF_TREES_PER_FILE:
                 per_file = GLTF_TREES_PER_FILE
@@ -344,13 +344,13 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
                               split=opts.split, opts=opts.reduce, frame_start=job.first,
                               textures=job.textures, trees_per_file=per_file,
                               write_files=_pool(job, "gltf", len(job.bake.trees) if opts.split
-                                                else files_of))
+                                                else files_of),
+                              progress=lambda d, t, f=fmt: job.tick(f, d, t))
             files += res.files
             manifest["animation"] = _rounded(res.animation)
             manifest["animation"]["tolerances"] = {
                 "position_m": opts.reduce.position_tolerance,
                 "angle_deg": round(math.degrees(opts.reduce.angle_tolerance), 9)}
-            job.tick(fmt, 1, 1)
     return files
 
 

@@ -274,3 +274,24 @@ def test_gltf_of_many_trees_comes_in_files_of_n_trees_with_every_tree_once(strea
     for name, t in moving.items():  # within the keyframe reduction's tolerance
         assert np.abs(seen[name].positions - t.positions).max() < 0.004
     assert rep.manifest["settings"]["trees_per_file"] == 40
+
+
+def test_a_glb_export_reports_its_trees_as_each_file_is_written(streamed, tmp_path):
+    """Progress of a glb export in files of 40 trees: the trees written so
+    far after each file (its file already on disk), not one tick at the end."""
+    from treebake.export import ExportOptions, export_bake
+
+    path, _, _ = streamed
+    bake = load_bake(path, lazy=True)
+    ticks = []
+
+    def progress(stage, done, total):
+        if stage == "glb":
+            parts = len(list((tmp_path / "f").glob("f.part*.glb")))
+            ticks.append((done, total, parts))
+
+    export_bake(bake, tmp_path, "f", ExportOptions(formats=("glb",), trees_per_file=40),
+                progress=progress)
+    n = len(bake.trees)
+    assert n == 91
+    assert ticks == [(0, n, 0), (40, n, 1), (80, n, 2), (n, n, 3)]

@@ -508,7 +508,8 @@ def export_gltf(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: s
                 opts: ReduceOptions | None = None, frame_start: int = 1,
                 textures: dict[str, Texture | None] | None = None,
                 trees_per_file: int | None = None,
-                write_files: FileWriter | None = None) -> GltfResult:
+                write_files: FileWriter | None = None,
+                progress: Callable[[int, int], None] | None = None) -> GltfResult:
     """Write `out/name.glb` (or .gltf + .bin); split: one file per tree,
     `name.<tree>.glb`, and the projectiles in `name.objects.glb`;
     `trees_per_file` N: files of at most N trees, `name.part0001.glb`, ...
@@ -517,17 +518,21 @@ def export_gltf(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: s
     (frame_start + f) / fps s. `textures`: material name -> Texture to
     embed (textures.py); others stay plain. The files are written here or
     by `write_files(jobs, settings)`, which yields them in the jobs' order
-    (worker processes: export_pool.py): the same bytes."""
+    (worker processes: export_pool.py): the same bytes. `progress(done,
+    total)` hears the trees written as each file is."""
     settings = GltfSettings(Path(out), binary, opts or ReduceOptions(), frame_start, textures)
     jobs = gltf_files(bake, name, split, trees_per_file)
     if write_files is None:
-        written = [write_gltf_file(bake, meshes, job, settings) for job in jobs]
+        written = (write_gltf_file(bake, meshes, job, settings) for job in jobs)
     else:
         written = write_files(jobs, settings)
     result = GltfResult()
     reports = []
-    extra = 0
-    for w in written:
+    extra = done = 0
+    for job, w in zip(jobs, written, strict=True):
+        done += len(job.trees)
+        if progress is not None:
+            progress(done, len(bake.trees))
         result.files += w.files
         reports += w.reports
         extra += w.extra_samples
