@@ -100,8 +100,9 @@ GRAMMAR_OPTIONS = (
 EXPORT_OPTIONS = Group("export options", (
     opt("--split", action="store_true", help="glTF: one file per tree"),
     opt("--trees-per-file", type=int, default=None,
-        help="glTF: at most N trees a file, NAME.part0001.glb, ... (default: one file up to "
-             "250 trees, files of 250 beyond)"),
+        help="glTF and OBJ: at most N trees a file, NAME.part0001.glb, ..., or an OBJ "
+             "sequence per N trees, NAME.part0001.0001.obj, ... (default: one file or "
+             "sequence up to 250 trees, 250 each beyond)"),
     opt("--usd-layers", choices=("auto", "one", "tree"), default="auto",
         help="USD: one file, or a root stage that loads a layer per tree as a payload "
              "(NAME.trees/TREE.usd); default auto: per tree past 100 trees"),

@@ -10,7 +10,7 @@ import hashlib
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__
@@ -328,6 +328,15 @@ def _write_texture_pngs(job: _Job) -> list[Path]:
     return files
 
 
+def _trees_per_file(job: _Job) -> int | None:
+    """Trees a glTF file or OBJ sequence holds: --trees-per-file, else
+    GLTF_TREES_PER_FILE past that many trees, else all (None)."""
+    per_file = job.opts.trees_per_file
+    if per_file is None and len(job.bake.trees) > GLTF_TREES_PER_FILE:
+        per_file = GLTF_TREES_PER_FILE
+    return per_file
+
+
 def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
     """.glb and .gltf files; their keyframe reduction goes into the manifest."""
     opts, files = job.opts, []
@@ -336,9 +345,7 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
             from .exchange.gltf import export_gltf
 
             job.tick(fmt, 0, len(job.bake.trees))
-            per_file = opts.trees_per_file
-            if per_file is None and len(job.bake.trees) > GLTF_TREES_PER_FILE:
-                per_file = GLTF_TREES_PER_FILE
+            per_file = _trees_per_file(job)
             files_of = -(-len(job.bake.trees) // per_file) if per_file else 1
             res = export_gltf(job.bake, job.meshes, job.folder, job.name, binary=fmt == "glb",
                               split=opts.split, opts=opts.reduce, frame_start=job.first,
@@ -355,20 +362,21 @@ def _write_gltf(job: _Job, manifest: dict) -> list[Path]:
 
 
 def _write_obj(job: _Job, manifest: dict) -> list[Path]:
-    """The OBJ sequence in obj/; its frame numbers go into the manifest."""
+    """The OBJ sequences in obj/ (one, or one per `trees_per_file` trees as
+    glTF's files); their frame numbers go into the manifest."""
     if "obj" not in job.opts.formats:
         return []
     from .exchange.obj import export_obj
 
-    # every frame file holds every tree: the OBJ sequence reads the whole
-    # shot into memory (glb and USD write tree by tree)
-    bake = replace(job.bake, trees=list(job.bake.trees))
-    res = export_obj(bake, list(job.meshes), job.folder / "obj", job.name, job.opts.obj_stride,
+    res = export_obj(job.bake, job.meshes, job.folder / "obj", job.name, job.opts.obj_stride,
                      progress=lambda d, t: job.tick("obj", d, t), frame_start=job.first,
-                     maps=job.maps)
-    manifest["frames"]["obj"] = {"stride": job.opts.obj_stride, "files": len(res.frames),
+                     maps=job.maps, trees_per_file=_trees_per_file(job))
+    manifest["frames"]["obj"] = {"stride": job.opts.obj_stride,
+                                 "files": len(res.frames) * res.parts,
                                  "first": res.frames[0] + job.first,
                                  "last": res.frames[-1] + job.first}
+    if res.parts > 1:
+        manifest["frames"]["obj"]["sequences"] = res.parts
     return res.files
 
 

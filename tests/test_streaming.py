@@ -295,3 +295,54 @@ def test_a_glb_export_reports_its_trees_as_each_file_is_written(streamed, tmp_pa
     n = len(bake.trees)
     assert n == 91
     assert ticks == [(0, n, 0), (40, n, 1), (80, n, 2), (n, n, 3)]
+
+
+def _obj_objects(path) -> dict[str, list[str]]:
+    """An OBJ file's objects: name -> its `v` and `vn` lines (the posed mesh)."""
+    objects: dict[str, list[str]] = {}
+    current = None
+    for line in path.read_text().splitlines():
+        if line.startswith("o "):
+            current = objects.setdefault(line[2:], [])
+        elif line.startswith(("v ", "vn ")):
+            current.append(line)
+    return objects
+
+
+def test_obj_of_many_trees_comes_in_sequences_of_n_trees(streamed, tmp_path, monkeypatch):
+    """An OBJ export in sequences of 40 trees (91 trees: three) poses every
+    tree as the one-sequence export does, each tree in exactly one
+    sequence, one shared .mtl; the disk check counts every sequence's first
+    frame (the bytes it then wrote), not the first sequence's alone."""
+    from treebake.exchange import obj
+    from treebake.export import ExportOptions, export_bake
+
+    path, _, _ = streamed
+    measured = []
+    real = obj.check_room
+    monkeypatch.setattr(obj, "check_room", lambda out, size, frames, stride:
+                        measured.append(size) or real(out, size, frames, stride))
+    one = export_bake(load_bake(path, lazy=True), tmp_path / "one", "f",
+                      ExportOptions(formats=("obj",), obj_stride=4))
+    parts = export_bake(load_bake(path, lazy=True), tmp_path / "parts", "f",
+                        ExportOptions(formats=("obj",), obj_stride=4, trees_per_file=40))
+    folder = tmp_path / "parts" / "f" / "obj"
+    stems = sorted({p.name.rsplit(".", 2)[0] for p in folder.glob("f.part*.obj")})
+    assert stems == ["f.part0001", "f.part0002", "f.part0003"]
+    assert sorted(p.name for p in folder.glob("*.mtl")) == ["f.mtl"]
+    frames = sorted(p.name.rsplit(".", 2)[1] for p in folder.glob("f.part0001.*.obj"))
+    assert len(frames) == 4 and frames == sorted(
+        p.name.rsplit(".", 2)[1] for p in (tmp_path / "one" / "f" / "obj").glob("f.*.obj"))
+    for frame in frames:
+        whole = _obj_objects(tmp_path / "one" / "f" / "obj" / f"f.{frame}.obj")
+        seen: dict[str, list[str]] = {}
+        for stem in stems:
+            got = _obj_objects(folder / f"{stem}.{frame}.obj")
+            assert not set(got) & set(seen)
+            seen.update(got)
+        assert seen == whole and len(seen) == 91
+    first = sum((folder / f"{stem}.{frames[0]}.obj").stat().st_size for stem in stems)
+    assert measured[-1] == first > (folder / f"f.part0001.{frames[0]}.obj").stat().st_size
+    assert parts.manifest["frames"]["obj"]["files"] == 12
+    assert parts.manifest["frames"]["obj"]["sequences"] == 3
+    assert "sequences" not in one.manifest["frames"]["obj"]

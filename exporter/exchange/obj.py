@@ -1,6 +1,7 @@
 """OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (file
 number = frame_start + bake frame index, zero-padded to 4 digits or more),
-one shared `name.mtl`. Frames only: extra sub-frame samples are not
+one shared `name.mtl`; past `trees_per_file` trees, a sequence per that
+many trees (`name.part0001.0001.obj`, ...), written one after the other. Frames only: extra sub-frame samples are not
 written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
 
 Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
@@ -10,7 +11,7 @@ Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -88,74 +89,124 @@ def _block(name: str, mesh: TreeMesh, offset: int) -> _Block:
 class ObjResult:
     files: list[Path] = field(default_factory=list)
     frames: list[int] = field(default_factory=list)  # bake frame indices written
+    parts: int = 1  # sequences of trees_per_file trees each (1: every tree in one)
 
 
 def frame_digits(frames: int) -> int:
     return max(4, len(str(frames)))
 
 
-def export_obj(bake: Bake, meshes: list[TreeMesh], out: str | Path, name: str,
+@dataclass
+class _Part:
+    """One sequence of an export: its file stem, trees and whether it holds
+    the projectiles."""
+
+    stem: str
+    trees: range
+    objects: bool
+
+
+def _parts(count: int, name: str, trees_per_file: int | None) -> list[_Part]:
+    if not trees_per_file or count <= trees_per_file:
+        return [_Part(name, range(count), True)]
+    starts = range(0, count, trees_per_file)
+    digits = max(4, len(str(len(starts))))
+    return [_Part(f"{name}.part{k + 1:0{digits}d}", range(a, min(a + trees_per_file, count)),
+                  k == 0) for k, a in enumerate(starts)]
+
+
+def export_obj(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: str,
                stride: int = 1, progress: Callable[[int, int], None] | None = None,
-               frame_start: int = 1, maps: dict[str, TextureMap] | None = None
-               ) -> ObjResult:
+               frame_start: int = 1, maps: dict[str, TextureMap] | None = None,
+               trees_per_file: int | None = None) -> ObjResult:
     """Write `out/name.mtl` and `out/name.NNNN.obj` for every `stride`-th
     frame, NNNN = frame_start + the bake's frame index; `maps`: textures
-    for the .mtl (mtl_text)."""
+    for the .mtl (mtl_text). `trees_per_file` N, when the bake has more
+    trees: a sequence per N trees, `name.part0001.NNNN.obj`, ... (the
+    projectiles in the first), written one after the other, each holding
+    only its trees in memory; one `name.mtl`. Every sequence's size is
+    checked against the free disk before any file is written."""
     if stride < 1:
         raise ValueError("stride must be >= 1")
     out = Path(out)
-    materials: dict[str, tuple[float, float, float]] = {}
-    blocks: list[_Block] = []
-    offset = 0
-    for tree, mesh in zip(bake.trees, meshes):
-        for part in mesh.parts:
-            materials.setdefault(part.shader, part.colour)
-        blocks.append(_block(_safe(tree.name), mesh, offset))
-        offset += mesh.n_vertices
-    objects = []
-    if bake.objects is not None:
-        o = bake.objects
-        for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
-            mesh = object_mesh(shape, float(size))
-            materials.setdefault("object", OBJECT_COLOUR)
-            objects.append(_block(f"projectile_{k}", mesh, offset))
-            offset += mesh.n_vertices
-    result = ObjResult()
-    mtl = f"{name}.mtl"
+    parts = _parts(len(bake.trees), name, trees_per_file)
     frames = list(range(0, len(bake.times), stride))
     digits = frame_digits(frame_start + len(bake.times) - 1)
+    materials: dict[str, tuple[float, float, float]] = {}
+    # every sequence's first frame, measured before any file (the disk check
+    # covers the whole export); a part's trees are let go once measured,
+    # unless there is one part
+    need, kept = 0, None
+    for part in parts:
+        seq = _Sequence(bake, meshes, part, name, frame_start, materials)
+        need += len(seq.text(frames[0]))
+        kept = seq if len(parts) == 1 else None
+    check_room(out, need, len(frames), stride)
+    result = ObjResult(parts=len(parts))
+    result.files.append(write_bytes(out / f"{name}.mtl",
+                                    mtl_text(materials, maps).encode("ascii")))
+    written = 0
+    for part in parts:
+        seq = kept or _Sequence(bake, meshes, part, name, frame_start, materials)
+        for f in frames:
+            path = out / f"{part.stem}.{frame_start + f:0{digits}d}.obj"
+            result.files.append(write_bytes(path, seq.text(f)))
+            written += 1
+            if progress is not None:
+                progress(written, len(frames) * len(parts))
+    result.frames = frames
+    return result
 
-    def frame_text(f: int) -> bytes:
-        header = (f"# treebake {__version__}: {bake.meta.get('scene', name)}, "
-                  f"frame {frame_start + f}, "
+
+class _Sequence:
+    """The trees of one part (read once) and their frame-independent text;
+    `text(f)`: the OBJ file of bake frame f. Notes each material's colour
+    in `materials`."""
+
+    def __init__(self, bake: Bake, meshes: Sequence[TreeMesh], part: _Part, name: str,
+                 frame_start: int, materials: dict) -> None:
+        self.bake, self.name, self.frame_start = bake, name, frame_start
+        self.trees, self.blocks = [], []
+        offset = 0
+        for i in part.trees:  # each tree read once: its mesh is built from the tree just read
+            tree = bake.trees[i]
+            mesh = meshes[i]
+            for p in mesh.parts:
+                materials.setdefault(p.shader, p.colour)
+            self.trees.append(tree)
+            self.blocks.append(_block(_safe(tree.name), mesh, offset))
+            offset += mesh.n_vertices
+        self.objects = []
+        if part.objects and bake.objects is not None:
+            o = bake.objects
+            for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
+                mesh = object_mesh(shape, float(size))
+                materials.setdefault("object", OBJECT_COLOUR)
+                self.objects.append(_block(f"projectile_{k}", mesh, offset))
+                offset += mesh.n_vertices
+
+    def text(self, f: int) -> bytes:
+        bake = self.bake
+        header = (f"# treebake {__version__}: {bake.meta.get('scene', self.name)}, "
+                  f"frame {self.frame_start + f}, "
                   f"t = {float(bake.times[f]):.6f} s, metres, Y up\n")
-        parts = [header, f"mtllib {mtl}\n"]
-        for tree, blk in zip(bake.trees, blocks):
+        parts = [header, f"mtllib {self.name}.mtl\n"]
+        for tree, blk in zip(self.trees, self.blocks):
             p, n = pose(blk.mesh, tree, f)
             parts.append(_object_text(blk, p, n))
-        for k, blk in enumerate(objects):
+        for k, blk in enumerate(self.objects):
             p, n = pose_rigid(blk.mesh, bake.objects.positions[f, k].astype(np.float64),
                               bake.objects.rotations[f, k])
             parts.append(_object_text(blk, p, n))
         return "".join(parts).encode("ascii")
 
-    first = frame_text(frames[0])
-    check_room(out, len(first), len(frames), stride)
-    result.files.append(write_bytes(out / mtl, mtl_text(materials, maps).encode("ascii")))
-    for done, f in enumerate(frames):
-        path = out / f"{name}.{frame_start + f:0{digits}d}.obj"
-        result.files.append(write_bytes(path, first if done == 0 else frame_text(f)))
-        result.frames.append(f)
-        if progress is not None:
-            progress(done + 1, len(frames))
-    return result
-
 
 def check_room(out: Path, frame_bytes: int, frames: int, stride: int) -> None:
-    """Refuse (OutputError), before writing any of it, a sequence of
-    `frames` files of about `frame_bytes` each (the first frame's size:
-    every frame has the same vertices) that the free disk at `out` cannot
-    hold: a 1,000-tree forest's 241 frames are 62 GB."""
+    """Refuse (OutputError), before writing any of it, an OBJ export of
+    `frames` frames of about `frame_bytes` each (the first frame's size,
+    every sequence's together: every frame has the same vertices) that the
+    free disk at `out` cannot hold: a 1,000-tree forest's 241 frames are
+    62 GB."""
     need = frame_bytes * frames
     free = free_disk(out)
     if free is not None and need > free:
