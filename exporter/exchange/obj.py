@@ -135,12 +135,15 @@ def export_obj(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
     materials: dict[str, tuple[float, float, float]] = {}
     # every sequence's first frame, measured before any file (the disk check
     # covers the whole export); a part's trees are let go once measured,
-    # unless there is one part
-    need, kept = 0, None
+    # unless there is one part (then its first frame is kept to be written)
+    need, kept, first = 0, None, None
     for part in parts:
         seq = _Sequence(bake, meshes, part, name, frame_start, materials)
-        need += len(seq.text(frames[0]))
-        kept = seq if len(parts) == 1 else None
+        text = seq.text(frames[0])
+        need += len(text)
+        if len(parts) == 1:
+            kept, first = seq, text
+        del seq, text
     check_room(out, need, len(frames), stride)
     result = ObjResult(parts=len(parts))
     result.files.append(write_bytes(out / f"{name}.mtl",
@@ -150,7 +153,8 @@ def export_obj(bake: Bake, meshes: Sequence[TreeMesh], out: str | Path, name: st
         seq = kept or _Sequence(bake, meshes, part, name, frame_start, materials)
         for f in frames:
             path = out / f"{part.stem}.{frame_start + f:0{digits}d}.obj"
-            result.files.append(write_bytes(path, seq.text(f)))
+            text = first if f == frames[0] and first is not None else seq.text(f)
+            result.files.append(write_bytes(path, text))
             written += 1
             if progress is not None:
                 progress(written, len(frames) * len(parts))
