@@ -1,8 +1,9 @@
 """OBJ sequence writer: one posed mesh per frame, `name.0001.obj` (file
 number = frame_start + bake frame index, zero-padded to 4 digits or more),
 one shared `name.mtl`; past `trees_per_file` trees, a sequence per that
-many trees (`name.part0001.0001.obj`, ...), written one after the other. Frames only: extra sub-frame samples are not
-written. Y up like glTF ((x, y, z) -> (x, z, -y)), metres.
+many trees (`name.part0001.0001.obj`, ...), written one after the other.
+Frames only: extra sub-frame samples are not written. Y up like glTF
+((x, y, z) -> (x, z, -y)), metres.
 
 Each file: `mtllib`, then per tree/projectile an `o` block with `v`, `vt`,
 `vn` (one of each per vertex, so faces are `f i/i/i j/j/j k/k/k`) and
