@@ -23,6 +23,8 @@ from .sim.run import segments_held, simulate, solver_kind
 from .sim.solver import SolveResult
 from .versions import runtime_versions
 
+ANNOUNCE_TREES = 500  # a shot this large takes seconds to grow and rig (10,000 trees: 12 s)
+
 
 def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = None,
                log=None, progress=None, workers: int = 1,
@@ -48,6 +50,8 @@ def bake_scene(scene: Scene, solver: str = "planar", quality: Quality | None = N
     versions = runtime_versions()  # what makes the motion, as the bake starts
     scene = scene if quality is None else replace(scene, quality=quality)
     budget = budget or Budget()
+    if log and len(scene.trees) >= ANNOUNCE_TREES:  # else the log is silent until the plan line
+        log(f"growing and rigging {len(scene.trees):,} trees")
     grown = grow(scene, budget, workers)
     rigged = rig_scene(scene, grown, quality, log, workers)
     looping = loop.plan(scene, [t.rig for t in rigged.trees if t.active],

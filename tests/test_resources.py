@@ -157,3 +157,23 @@ def test_a_batch_on_a_full_disk_still_prints_its_table(tmp_path, monkeypatch, ca
     assert code == 1
     assert "s     done" in out and "summary not written" in out, out
     assert f"{summary}: the disk is full" in err
+
+
+@pytest.mark.parametrize("threshold, announced", [(3, True), (4, False)])
+def test_a_large_shot_says_it_is_growing_before_the_silent_stages(monkeypatch, root,
+                                                                  threshold, announced):
+    """Growing and rigging 10,000 trees takes 12 s before the plan line: a
+    shot of ANNOUNCE_TREES trees or more says so first; a smaller one does
+    not add the line."""
+    from treebake import pipeline
+
+    monkeypatch.setattr(pipeline, "ANNOUNCE_TREES", threshold)
+    sapling = str(root / "grammars" / "sapling.lsys")
+    scene = parse_scene({"tree": [{"grammar": sapling, "position": [4.0 * k, 0.0]}
+                                  for k in range(3)], "duration": 0.1}, file="<test>")
+    lines: list[str] = []
+    bake_scene(scene, log=lines.append)
+    grow_line = [k for k, x in enumerate(lines) if x == "growing and rigging 3 trees"]
+    plan = next(k for k, x in enumerate(lines) if x.startswith("3 trees, "))
+    assert grow_line == ([0] if announced else []), lines
+    assert plan > 0 if announced else plan == 0

@@ -102,6 +102,6 @@ def rig_scene(scene: Scene, grown: list[GrownTree], quality: Quality | None = No
         log(f"culling: {c['unseen']} trees never in view, {c['far']} far "
             f"({scene.camera.far_quality}), {c['no_force']} reached by no force")
     active = [t for t in out.trees if t.active]
-    log(f"{len(grown)} tree{'' if len(grown) == 1 else 's'}, {len(active)} simulated, "
-        f"{sum(t.rig.n_bones for t in active)} bones, quality {scene.quality.name}")
+    log(f"{len(grown):,} tree{'' if len(grown) == 1 else 's'}, {len(active):,} simulated, "
+        f"{sum(t.rig.n_bones for t in active):,} bones, quality {scene.quality.name}")
     return out
