@@ -29,6 +29,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -168,10 +169,7 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             _clean_stale(folder)
             (folder / "job.json").unlink(missing_ok=True)
             scene = scene_of(job)
-            tick = None
-            if progress is not None:
-                def tick(done, total, name=job.name):
-                    progress(name, done, total)
+            tick = None if progress is None else partial(progress, job.name)  # (done, total)
             bake_path = folder / f"{job.name}.npz"
             bake = bake_scene(scene, solver=job.solver, progress=tick,
                               budget=Budget(folder=folder), path=bake_path,

@@ -97,7 +97,7 @@ class LowRankFactor:
     with it, both O(n r^2 + n BLOCK)."""
 
     def __init__(self, matrix: TreeMatrix):
-        self.n = n = len(matrix.parent)
+        self.n = len(matrix.parent)
         r = matrix.u.shape[1]
         self.drop = ~np.asarray(matrix.keep, dtype=bool)
         w, diag = self._factor(matrix)
