@@ -83,13 +83,24 @@ def _check_name(file: str, key: str, name: str) -> str:
     return name
 
 
-def _path(file: str, base: Path, key: str, value: Any) -> str:
+def _path(file: str, base: Path, key: str, value: Any, kind: str) -> str:
+    """A job's `scene` (kind "preset") or `grammar` ("grammar") as an
+    absolute path: a file relative to the job file, else a bundled one
+    named as on the command line (`preset:gale`, `oak`, `grammar:forest/birch`)."""
+    from . import library
+
     if not isinstance(value, str):
         raise _fail(file, key, f"must be a path string, got {value!r}")
     p = (base / value).resolve()
-    if not p.is_file():
-        raise _fail(file, key, f"file not found: {p}")
-    return str(p)
+    if p.is_file():
+        return str(p)
+    prefixed = value.startswith((library.PRESET_PREFIX, library.GRAMMAR_PREFIX))
+    if prefixed or (Path(value).suffix == "" and not p.exists()):
+        try:
+            return str(library.resolve(value, (kind,)).resolve())
+        except InputError as exc:
+            raise _fail(file, key, str(exc)) from None
+    raise _fail(file, key, f"file not found: {p}")
 
 
 def _job(file: str, base: Path, raw: dict, key: str, defaults: dict) -> list[Job]:
@@ -99,8 +110,9 @@ def _job(file: str, base: Path, raw: dict, key: str, defaults: dict) -> list[Job
         if k not in JOB_KEYS:
             raise _fail(file, f"{key}.{k}", f"unknown key (allowed: {', '.join(sorted(JOB_KEYS))})")
     data = {**defaults, **raw}
-    scene = _path(file, base, f"{key}.scene", data["scene"]) if "scene" in data else None
-    grammar = _path(file, base, f"{key}.grammar", data["grammar"]) if "grammar" in data else None
+    scene = _path(file, base, f"{key}.scene", data["scene"], "preset") if "scene" in data else None
+    grammar = (_path(file, base, f"{key}.grammar", data["grammar"], "grammar")
+               if "grammar" in data else None)
     if scene is None and grammar is None:
         raise _fail(file, key, "needs a scene or a grammar")
     default_name = Path(grammar or scene).stem

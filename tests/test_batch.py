@@ -73,6 +73,36 @@ seeds = [1, 2]
                                            f'[[job]]\ngrammar = "ROOT/{SAPLING}"\n'))
 
 
+def test_jobs_name_bundled_scenes_and_grammars_as_the_command_line_does(tmp_path, root):
+    """`preset:NAME`, `grammar:NAME` and a bare bundled name resolve to the
+    same files as `treebake bake` takes; a file beside the job file wins
+    over a bundled name; a wrong name is the job file's error, naming the key."""
+    from treebake import library
+
+    jobs = load_jobs(job_file(tmp_path, root, """
+[[job]]
+scene = "preset:gale"
+[[job]]
+grammar = "oak"
+scene = "breeze"
+[[job]]
+grammar = "grammar:forest/birch"
+"""))
+    assert [(j.name, j.scene, j.grammar) for j in jobs] == [
+        ("gale", str(library.preset_path("gale").resolve()), None),
+        ("oak-breeze", str(library.preset_path("breeze").resolve()),
+         str(library.grammar_path("oak").resolve())),
+        ("birch", None, str(library.grammar_path("forest/birch").resolve()))]
+    (tmp_path / "oak").write_text((root / SAPLING).read_text())  # a local file named oak
+    local = load_jobs(job_file(tmp_path, root, '[[job]]\ngrammar = "oak"\n'))
+    assert local[0].grammar == str(tmp_path / "oak")
+    for body, message in [('scene = "preset:nope"', r"job\[0\]\.scene: no bundled preset 'nope'"),
+                          ('grammar = "preset:gale"', r"job\[0\]\.grammar: 'preset:gale' is neither"),
+                          ('scene = "missing.toml"', r"job\[0\]\.scene: file not found")]:
+        with pytest.raises(SceneError, match=message):
+            load_jobs(job_file(tmp_path, root, f"[[job]]\n{body}\n"))
+
+
 def test_a_broken_job_does_not_stop_the_others(tmp_path, root):
     bad = tmp_path / "bad.lsys"
     bad.write_text("axiom: F\nF -> F(1/0)\niterations: 2\n")  # division by zero when derived
