@@ -230,7 +230,7 @@ def cmd_export(args) -> int:
     opts = export_options(args)
     check_options(opts)
     bake = load_bake(path, lazy=True)  # the writers read a tree at a time
-    name = job_name(args.name or str(bake.meta.get("scene") or "bake"))
+    name = job_name(args.name or path.stem)  # a bake's own folder: out/NAME/NAME.npz
     with job_lock(Path(args.out) / name):
         report = run_export(bake, path, args.out, name, opts, args)
     if args.json:
@@ -250,7 +250,7 @@ def cmd_preview(args) -> int:
     if not 64 <= args.size <= 2048:
         raise InputError(f"--size must be in 64..2048 px, got {args.size}")
     bake = load_bake(path)
-    name = job_name(args.name or str(bake.meta.get("scene") or path.stem))
+    name = job_name(args.name or path.stem)
     stage = None if args.quiet else stage_progress()
     progress = None if stage is None else (lambda d, t: stage("preview", d, t))
     with output_folder(Path(args.out) / name) as folder:

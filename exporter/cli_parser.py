@@ -74,7 +74,8 @@ STABILITY_QUICK_BUDGET = "135 CPU s (a run that would end past 5 min is skipped)
 
 QUALITY = ("draft", "default", "final")
 OUT = opt("--out", default="out", help="output folder (default: out)")
-JOB_NAME = opt("--name", help="job name: the output subfolder (default: the bake's scene)")
+JOB_NAME = opt("--name", help="job name: the output subfolder (default: the bake file's "
+                               "name, so OUT/NAME/NAME.npz exports beside itself)")
 QUIET = opt("-q", "--quiet", action="store_true", help="no progress on stderr")
 STRICT = opt("--strict", action="store_true",
              help="grammar warnings (a module whose parameter count no production takes, "

@@ -88,6 +88,19 @@ def test_an_obj_sequence_prints_as_one_entry(tmp_path, monkeypatch, capsys):
                          "obj/textures/leaf.png, manifest.json"), line
 
 
+def test_export_and_preview_write_beside_a_bake_named_with_name(tmp_path, monkeypatch, capsys):
+    """A bake made with --name exports into its own folder by default,
+    not into the scene's (where it overwrote another bake's files)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["bake", "sapling", *QUICK, "--name", "take2"]) == 0
+    assert main(["export", "out/take2/take2.npz", "--format", "glb", "-q"]) == 0
+    assert main(["preview", "out/take2/take2.npz", "--size", "64", "-q"]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "out" / "take2" / "take2.glb").is_file()
+    assert list((tmp_path / "out" / "take2").glob("take2*.gif"))
+    assert not (tmp_path / "out" / "sapling").exists()
+
+
 def test_file_lists_collapse_numbered_sequences():
     from treebake.cli_bake import file_list
 
