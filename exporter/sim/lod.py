@@ -23,7 +23,7 @@ from .common import SimTree
 from .loads import SceneLoads
 from .handoff import spans_text
 from .notes import solve_result
-from .progress import ChunkProgress
+from .progress import ChunkProgress, ForwardedPlan, forward_to
 from .scheduler import ChunkResult, results_in_order, simulate_chunk
 from .solver import SolveResult
 
@@ -84,10 +84,16 @@ def _simulate(trees, plan, scene, loads, workers, log, progress) -> Iterator[Chu
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(simulate_chunk, [trees[i] for i in members], scene, q, loads)
-                   for q, members in plan]
-        yield from results_in_order(futures, progress)
+    # the workers tell their frames as they go (progress.ForwardedPlan): a
+    # log is not silent while a chunk runs (30 s on preset:explosion)
+    events = None if progress is None else ctx.Queue()
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=None if events is None else forward_to,
+                             initargs=() if events is None else (events,)) as pool:
+        futures = [pool.submit(simulate_chunk, [trees[i] for i in members], scene, q, loads,
+                               None, None if events is None else ForwardedPlan(k))
+                   for k, (q, members) in enumerate(plan)]
+        yield from results_in_order(futures, progress, events)
 
 
 class PlanarLOD:

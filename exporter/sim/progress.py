@@ -8,6 +8,7 @@ hand-offs as they come."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -26,6 +27,7 @@ COST = {Engine.LINEAR: 1.0, Engine.PYMUNK: 40.0, Engine.REFERENCE: 25.0}
 # IMPACT_TIME s (the fall, the breaks, the parts on the ground), then LYING
 FAST_LEAN = {Engine.PYMUNK: 0.25, Engine.REFERENCE: 1.0}
 IMPACT, IMPACT_TIME, LYING = 7.0, 3.0, 3.0
+FORWARD_SECONDS = 0.5  # a worker's ticks to the parent at most this often
 
 
 class ChunkProgress:
@@ -47,9 +49,20 @@ class ChunkProgress:
         return self.chunks[k]
 
     def chunk_done(self, k: int) -> None:
-        """A chunk simulated elsewhere (a worker process) is done, as planned."""
-        self.done += self.chunks[k].planned
+        """Chunk k is done: what its plan held beyond the work already told
+        (ticks forwarded from a worker process, or none: a Dask task) is
+        done too; later ticks of it are ignored."""
+        c = self.chunks[k]
+        if not c.finished:
+            self.done += max(c.planned - c.ticked, 0.0)
+            c.finished = True
         self.tell()
+
+    def apply(self, k: int, event: str, engine: Engine, trees: list[int], frame: int) -> None:
+        """A ForwardedPlan's call (`event` "start" or "tick") on chunk k's plan."""
+        c = self.chunks[k]
+        if not c.finished:
+            (c.start if event == "start" else c.tick)(engine, trees, frame)
 
     def tell(self) -> None:
         self.report(self.done, max(self.planned, self.done))
@@ -82,26 +95,63 @@ class ChunkPlan:
                 self.cost[i, f:] = COST[engine] * self.size[i, f:]
         self.cost[:, 0] = 0.0  # frame 0 is the rest pose
         self.counted = np.zeros(len(trees), dtype=np.int64)  # per tree, frames done
-
-    @property
-    def planned(self) -> float:
-        return float(self.cost.sum())
+        self.planned = float(self.cost.sum())  # kept as the plan changes: told every frame
+        self.ticked = 0.0  # the work its ticks told
+        self.finished = False
 
     def start(self, engine: Engine, trees: list[int], frame: int) -> None:
         """Trees go to `engine` from `frame`: their plan from there."""
         f = max(frame, 1)
         self.cost[trees, f:] = COST[engine] * self.size[trees, f:]
+        self.planned = float(self.cost.sum())
         self.owner.tell()
 
     def tick(self, engine: Engine, trees: list[int], frame: int) -> None:
-        """`engine` stepped `trees` to `frame` (a frame counts once per tree:
-        a run that starts before frames already done, after a restart or a
-        failed reference run, does them again unpaid)."""
-        new = [i for i in trees if frame > self.counted[i]]
-        if new:
+        """`engine` stepped `trees` to `frame`: the frames since each tree's
+        last tick are done (a frame counts once per tree: a run that starts
+        before frames already done, after a restart or a failed reference
+        run, does them again unpaid)."""
+        new = np.array([i for i in trees if frame > self.counted[i]], dtype=np.int64)
+        if len(new):
+            work = 0.0
+            for since in np.unique(self.counted[new]):  # trees that run together: one
+                rows = new[self.counted[new] == since]
+                work += float(self.cost[rows, since + 1:frame + 1].sum())
             self.counted[new] = frame
-            self.owner.done += float(self.cost[new, frame].sum())
+            self.ticked += work
+            self.owner.done += work
             self.owner.tell()
+
+
+_EVENTS = None  # a worker process's queue to the parent (listen_to)
+
+
+def forward_to(events) -> None:
+    """A worker process's initializer: ForwardedPlans put their calls on
+    `events` (a multiprocessing queue the parent drains)."""
+    global _EVENTS
+    _EVENTS = events
+    events.cancel_join_thread()  # progress left unread never holds up the worker's exit
+
+
+class ForwardedPlan:
+    """Chunk k's ChunkPlan in a worker process: its start calls, and a tick
+    every FORWARD_SECONDS, put on the queue of `forward_to` for
+    ChunkProgress.apply in the parent (a tick counts every frame since the
+    last; the chunk's end counts the rest)."""
+
+    def __init__(self, k: int):
+        self.k = k
+        self.sent = 0.0  # time.monotonic() of the last tick put
+
+    def start(self, engine: Engine, trees: list[int], frame: int) -> None:
+        _EVENTS.put((self.k, "start", engine, list(trees), frame))
+
+    def tick(self, engine: Engine, trees: list[int], frame: int) -> None:
+        now = time.monotonic()
+        if now - self.sent >= FORWARD_SECONDS:
+            self.sent = now
+            _EVENTS.put((self.k, "tick", engine, list(trees), frame))
 
 
 def lean_time(tree: SimTree, scene: Scene, share: float) -> float:

@@ -13,6 +13,7 @@ each engine it was in, in order (`TreeRecord`)."""
 
 from __future__ import annotations
 
+import queue
 import time
 from collections import deque
 from collections.abc import Iterator
@@ -300,12 +301,18 @@ def simulate_chunk(trees: list[SimTree], scene: Scene, quality: Quality, loads: 
     return chunk.result()
 
 
-def results_in_order(futures: list, progress=None) -> Iterator[ChunkResult]:
+def results_in_order(futures: list, progress=None, events=None) -> Iterator[ChunkResult]:
     """The chunks' results in plan order (local or Dask futures alike),
     `progress.chunk_done(k)` as each comes; each future is let go once its
-    result is taken, so finished chunks are not held."""
+    result is taken, so finished chunks are not held. `events`: a queue of
+    the workers' progress (progress.ForwardedPlan), applied while waiting."""
     for k in range(len(futures)):
         fut, futures[k] = futures[k], None
+        while events is not None and not fut.done():
+            try:
+                progress.apply(*events.get(timeout=0.2))
+            except queue.Empty:
+                pass
         yield fut.result()
         if hasattr(fut, "release"):  # Dask: the worker may forget it too
             fut.release()
