@@ -232,9 +232,8 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
         horizon = key_horizon(raw, overrides)
         raw = dict(raw)
         for key, value in overrides.items():
-            if key == "wind.speed":
-                if isinstance(raw.get("wind"), dict):
-                    raw["wind"] = with_wind_speed(raw["wind"], value)
+            if key == "wind.speed":  # a scene without [wind] gets one (as a batch job does)
+                raw["wind"] = with_wind_speed(raw.get("wind", {}), value)
             else:
                 raw[key] = value
         digest.update(repr(sorted(overrides.items())).encode())

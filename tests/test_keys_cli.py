@@ -149,6 +149,19 @@ def test_overrides_cut_the_keys_or_replace_them(tmp_path):
     assert steady.wind.speed == 7.0
 
 
+def test_wind_on_a_scene_without_wind_gives_it_one(tmp_path):
+    """`bake preset:felling --wind 30` baked the same bytes as without it:
+    a scene without [wind] now gets one at that speed, as a batch job does."""
+    from treebake.batch_jobs import Job, scene_of
+
+    path = write(tmp_path, "")
+    assert load_scene(path).wind is None
+    windy = load_scene(path, {"wind.speed": 30.0})
+    assert windy.wind is not None and windy.wind.speed == 30.0
+    job = Job("j", scene=str(path), wind=30.0)
+    assert scene_of(job).wind == windy.wind
+
+
 def test_the_docs_example_of_keys_is_a_valid_scene(root):
     import re
     import tomllib
