@@ -70,7 +70,7 @@ def cmd_bake(args) -> int:
     out = Path(args.out) / job_name(args.name or scene.name)
     log = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
     progress = None if args.quiet else progress_bar("simulating")
-    workers = args.workers or os.cpu_count() or 1
+    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
     if workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     timestep = None

@@ -19,6 +19,10 @@ BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is f
 def cmd_diff(args) -> int:
     from .diff import diff_bakes, exit_code, format_report, load_any, plot_report
 
+    for flag, value in (("--position-tolerance", args.position_tolerance),
+                        ("--angle-tolerance", args.angle_tolerance)):
+        if not value >= 0.0:  # NaN too
+            raise InputError(f"{flag} must be >= 0, got {value}")
     a, b = load_any(args.a), load_any(args.b)
     report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)
     if args.plot:
@@ -61,7 +65,7 @@ def cmd_batch(args) -> int:
 
     jobs = load_jobs(args.jobs_file)
     _warn_grammars(jobs, args.strict)
-    workers = args.jobs or os.cpu_count() or 1
+    workers = (os.cpu_count() or 1) if args.jobs is None else args.jobs
     if workers < 1:
         raise InputError(f"--jobs must be >= 1, got {args.jobs}")
     summary_path = Path(args.summary or Path(args.out) / "batch-summary.json")

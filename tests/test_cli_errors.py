@@ -272,3 +272,23 @@ def test_the_eta_counts_from_the_first_report_not_the_stages_before(monkeypatch,
     lines = capsys.readouterr().err.splitlines()
     assert lines == ["simulating: 0 %, estimating", "simulating: 50 %, 10 s left",
                      "simulating: done in 20.0 s"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["bake", "sapling", "--workers", "0"], "--workers must be >= 1, got 0"),
+    (["batch", "JOBS", "--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["diff", "BAKE", "BAKE", "--position-tolerance", "-1"],
+     "--position-tolerance must be >= 0, got -1.0"),
+    (["diff", "BAKE", "BAKE", "--angle-tolerance", "nan"], "--angle-tolerance must be >= 0, got nan"),
+])
+def test_counts_and_tolerances_out_of_range_are_refused(args, message, small_bake, tmp_path,
+                                                        root, capsys):
+    """0 workers was taken as every core, and a negative tolerance called two
+    identical bakes DIFFERENT (exit 1): both are exit 2 with the flag named."""
+    jobs = tmp_path / "jobs.toml"
+    jobs.write_text(f'[[job]]\ngrammar = "{root / SAPLING}"\nduration = 0.1\n')
+    args = [str(small_bake) if a == "BAKE" else str(jobs) if a == "JOBS" else a for a in args]
+    assert main([*args, "--out", str(tmp_path)] if args[0] != "diff" else args) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err, err
+    assert not (tmp_path / "sapling").exists() and not (tmp_path / "j").exists()
