@@ -318,12 +318,12 @@ COMMANDS: tuple[Command, ...] = (
 
 EXAMPLES = {
     "derive": "  treebake derive sapling --stats-only              # a bundled grammar by name\n"
-              "  treebake derive grammars/oak.lsys -n 4 -o oak.txt  # or a grammar file\n",
+              "  treebake derive my.lsys -n 4 -o my.txt            # or a grammar file\n",
     "inspect": "  treebake inspect oak            # out/oak/summary.json, preview.png\n"
                "  treebake inspect forest/birch --json --size 256\n",
     "bake": "  treebake bake preset:demo --format glb   # out/demo/demo.npz, demo.glb\n"
             "  treebake bake sapling --duration 4 --wind 12 --quality draft\n"
-            "  treebake bake presets/gale.toml --solver full --timestep 1/480 --name gale-ref\n"
+            "  treebake bake preset:gale --solver full --timestep 1/480 --name gale-ref\n"
             "  treebake bake preset:felling --format glb,usd\n",
     "export": "  treebake export out/demo/demo.npz --format glb,usd\n"
               "  treebake export out/demo/demo.npz --format obj --stride 2 --name demo-obj\n"
@@ -336,7 +336,7 @@ EXAMPLES = {
              "  treebake batch jobs.toml --out /shared/bakes --executor dask "
              "--scheduler tcp://head:8786\n",
     "sway": "  treebake sway oak\n"
-            "  treebake sway grammars/spruce.lsys --quality final --json\n",
+            "  treebake sway spruce --quality final --json\n",
     "list": "  treebake list                  # bundled grammars and presets, by name\n"
             "  treebake list presets --json   # with each file's path\n",
     "accuracy": "  treebake accuracy --species sapling --scenarios breeze gale --duration 2\n",

@@ -521,3 +521,16 @@ def test_a_resumed_job_removes_the_temporaries_a_killed_run_left(tmp_path):
     _clean_stale(tmp_path)
     assert [p for p in stale if p.exists()] == []
     assert all(p.exists() for p in kept)
+
+
+def test_the_docs_example_job_file_loads(root, tmp_path):
+    """docs/batch.md's job file, as a user copies it into an empty folder
+    (its bundled names need no checkout)."""
+    import re
+
+    text = (root / "docs" / "batch.md").read_text(encoding="utf-8")
+    example = re.search(r"```toml\n(.*?)```", text, re.S).group(1)
+    (tmp_path / "jobs.toml").write_text(example)
+    jobs = load_jobs(tmp_path / "jobs.toml")
+    assert [j.name for j in jobs][:4] == ["oak-gale", "sapling-s1", "sapling-s2", "sapling-s3"]
+    assert len(jobs) == 4 + 8 and {j.formats for j in jobs[4:]} == {("glb", "usd")}
