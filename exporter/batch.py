@@ -165,7 +165,7 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             fingerprint = resume_fingerprint(job)
             reason = "forced" if force else stale_reason(job, root, fingerprint)
             if reason is None:
-                return JobResult(job.name, "skipped", message="up to date")
+                return _skipped(job.name, folder, time.perf_counter() - start, "up to date")
             _clean_stale(folder)
             (folder / "job.json").unlink(missing_ok=True)
             scene = scene_of(job)
@@ -184,14 +184,14 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
                 files += report.files
             records = sorted((file_record(folder, p) for p in set(files)),
                              key=lambda r: r["path"])
+            frames, segments = len(bake.times), sum(t.n_segments for t in bake.trees)
             record = {"tool": f"treebake {__version__}", "job": asdict(job),
                       "hash": fingerprint.hash, "versions": fingerprint.versions,
-                      "files": records}
+                      "files": records, "frames": frames, "segments": segments}
             write_text(folder / "job.json", json.dumps(record, indent=2, sort_keys=True) + "\n")
             redone = "" if reason in ("not run yet", "forced") else f"redone: {reason}"
             return JobResult(job.name, "done", time.perf_counter() - start, redone,
-                             [r["path"] for r in records], len(bake.times),
-                             sum(t.n_segments for t in bake.trees))
+                             [r["path"] for r in records], frames, segments)
     except BusyError:  # another run writes this job now: its outcome is that run's to report
         return JobResult(job.name, "busy", time.perf_counter() - start, BUSY)
     except TreebakeError as exc:
@@ -274,10 +274,17 @@ def settle_busy(jobs: list[Job], results: list[JobResult], out: str | Path) -> l
 
 
 def _written_elsewhere(r: JobResult, folder: Path) -> JobResult:
-    """A busy job that the other run finished: its files from job.json."""
+    """A busy job that the other run finished: what its job.json records."""
+    return _skipped(r.name, folder, r.seconds, "written by another run")
+
+
+def _skipped(name: str, folder: Path, seconds: float, message: str) -> JobResult:
+    """A job not rerun, with the files, frames and segments its job.json
+    records (a summary that lists what the job made, done now or before)."""
     try:
         record = json.loads((folder / "job.json").read_text())
         files = [str(f["path"]) for f in record["files"]]
-    except (OSError, ValueError, KeyError, TypeError):
-        files = []
-    return JobResult(r.name, "skipped", r.seconds, "written by another run", files)
+        frames, segments = int(record.get("frames", 0)), int(record.get("segments", 0))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        files, frames, segments = [], 0, 0
+    return JobResult(name, "skipped", seconds, message, files, frames, segments)

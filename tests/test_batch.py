@@ -120,8 +120,14 @@ def test_a_broken_job_does_not_stop_the_others(tmp_path, root):
         assert f"{name}.glb" in paths and f"{name}.npz" in paths
     assert not (out / "broken" / "job.json").exists()
     # a rerun skips what is done and tries the broken one again
-    again = {r.name: r.status for r in run_batch(jobs, out, workers=1)}
+    rerun = run_batch(jobs, out, workers=1)
+    again = {r.name: r.status for r in rerun}
     assert again == {"a": "skipped", "b": "skipped", "c": "skipped", "broken": "failed"}
+    # a skipped job reports what it made, as when it was done (a summary
+    # said 0 frames, 0 segments and no files)
+    for first, later in zip(results[:3], rerun[:3]):
+        assert (later.files, later.frames, later.segments) == \
+               (first.files, first.frames, first.segments) and later.frames > 0
 
 
 def test_parallel_equals_serial_byte_for_byte(tmp_path, root):
