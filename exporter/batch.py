@@ -154,7 +154,7 @@ BUSY = "another run holds its folder and is writing it"
 
 def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult:
     """Bake and export one job into `out/<name>/`; never raises."""
-    from .export import ExportOptions, export_bake
+    from .export import ExportOptions, export_bake, remove_exports
     from .pipeline import bake_scene
 
     start = time.perf_counter()
@@ -174,6 +174,7 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             bake = bake_scene(scene, solver=job.solver, progress=tick,
                               budget=Budget(folder=folder), path=bake_path,
                               scheduler=job.scheduler)
+            remove_exports(folder)  # the previous bake's: a format dropped from the job would stay
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]
             if exports:

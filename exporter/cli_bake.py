@@ -61,7 +61,7 @@ def cmd_bake(args) -> int:
     import os
 
     from .bake_file import tree_field, tree_info
-    from .export import check_options
+    from .export import check_options, remove_exports
     from .fileio import job_lock
     from .pipeline import bake_scene
 
@@ -102,6 +102,10 @@ def cmd_bake(args) -> int:
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
                           workers=workers, timestep=timestep, budget=budget,
                           scheduler=args.scheduler, path=path)
+        stale = remove_exports(out)  # exported from the bake just replaced
+        if stale:
+            log(f"removed {plural(stale, 'file')} exported from the previous bake in {out} "
+                "(its manifest.json listed them)")
         exported = None
         if opts is not None and opts.formats:
             exported = run_export(bake, path, args.out, out.name, opts, args)

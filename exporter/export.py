@@ -6,6 +6,7 @@ frame range, sizes, keyframe reduction). The CLI's `export` and
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
@@ -311,6 +312,32 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     manifest["total_bytes"] = sum(e["bytes"] for e in manifest["files"])
     man = write_text(folder / "manifest.json", json.dumps(manifest, indent=2) + "\n")
     return ExportReport(folder, manifest, [*files, man])
+
+
+def remove_exports(folder: Path) -> int:
+    """Remove what an export wrote into `folder`: every file its
+    manifest.json lists (inside the folder; never a bake), the manifest,
+    and the subfolders left empty. For a new bake written there: files
+    exported from the previous one would pass for its. Returns the files
+    removed."""
+    manifest = folder / "manifest.json"
+    try:
+        listed = [str(f["path"]) for f in json.loads(manifest.read_text())["files"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
+    root, removed, parents = folder.resolve(), 0, set()
+    for rel in listed:
+        path = (folder / rel).resolve()
+        if root not in path.parents or path.suffix == ".npz" or not path.is_file():
+            continue
+        path.unlink()
+        removed += 1
+        parents.update(p for p in path.parents if root in p.parents)
+    manifest.unlink(missing_ok=True)
+    for sub in sorted(parents, key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):  # not empty: something else lives there
+            sub.rmdir()
+    return removed
 
 
 def _write_texture_pngs(job: _Job) -> list[Path]:

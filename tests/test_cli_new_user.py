@@ -288,3 +288,27 @@ def test_two_batch_runs_of_one_job_file_at_once(tmp_path):
     assert "1 done, 0 skipped, 0 failed, 1 busy" in out2
     assert "still being written by another run" in err2
     assert all((out / n / "job.json").is_file() for n in "ab")
+
+
+def test_a_new_bake_removes_the_exports_of_the_one_it_replaces(tmp_path, monkeypatch, capsys):
+    """A rebake left the previous bake's glb, OBJ frames and manifest (its
+    sha256 the old bake's) beside the new .npz, passing for its exports."""
+    import json
+
+    monkeypatch.chdir(tmp_path)
+    folder = tmp_path / "out" / "sapling"
+    assert main(["bake", "sapling", *QUICK, "--format", "glb,obj"]) == 0
+    listed = [f["path"] for f in json.loads((folder / "manifest.json").read_text())["files"]]
+    assert "sapling.glb" in listed and any(p.startswith("obj/") for p in listed)
+    (folder / "notes.txt").write_text("mine")  # not an export: it stays
+    outside = tmp_path / "out" / "keep.txt"
+    outside.write_text("outside the job folder")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["files"].append({"path": "../keep.txt"})  # a tampered manifest: never followed out
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    capsys.readouterr()
+    assert main(["bake", "sapling", "--duration", "0.1", "--fps", "10", "--quality", "draft"]) == 0
+    err = capsys.readouterr().err
+    assert f"removed {len(listed)} files exported from the previous bake" in err, err
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt", "sapling.npz"]
+    assert outside.read_text() == "outside the job folder"
