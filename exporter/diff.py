@@ -61,7 +61,7 @@ class DiffReport:
     rms_position: float  # m
     max_angle: float  # degrees
     rms_angle: float  # degrees
-    first_frame: int | None  # first frame past a tolerance, None if none
+    first_frame: int | None  # first frame past a tolerance (0-based), None if none
     first_time: float | None  # s
     worst: list[SegmentError]
     noise: bool  # everything within float32 round-off
@@ -77,6 +77,8 @@ class DiffReport:
     # trees whose drawn twigs (`@twig`) differ at rest, e.g. "oak: 412 vs 398 twigs";
     # twigs move with their segments, so only their rest shape can differ
     twig_differences: list[str] = field(default_factory=list)
+    # the number A's first frame has in its exports (the text report's frame numbers)
+    frame_start: int = 1
 
     def as_dict(self) -> dict:
         """The report for JSON: no curves; `version_differences` and
@@ -253,7 +255,17 @@ def diff_bakes(a: Bake, b: Bake, position_tolerance: float = 1e-3,
         position_tolerance=user_pos, angle_tolerance=user_ang, curves=tally.curves(),
         position_allowance=allow_pos, angle_allowance=allow_ang, allowance_note=note,
         version_differences=[] if first is None else version_differences(
-            a.meta.get("versions"), b.meta.get("versions")))
+            a.meta.get("versions"), b.meta.get("versions")),
+        frame_start=_frame_start(a))
+
+
+def _frame_start(bake: Bake) -> int:
+    """The number a bake's first frame gets in its exports (scene key
+    frame_start, default 1; export.frame_start)."""
+    try:
+        return int(bake.meta.get("frame_start", 1))
+    except (TypeError, ValueError):
+        return 1
 
 
 class _Tally:
@@ -328,20 +340,22 @@ def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
     else:
         verdict = "DIFFERENT"
     lines = [f"{name_a} vs {name_b}: {verdict}",
-             (f"  {r.segments} segments x {r.frames} frames; tolerance "
+             (f"  {r.segments} segments x {r.frames} frames ({r.frame_start}-"
+              f"{r.frame_start + r.frames - 1}, as in the exports); tolerance "
               f"{r.position_tolerance:g} m, {r.angle_tolerance:g} deg" +
               (f" (+ {r.position_allowance:g} m, {r.angle_allowance:g} deg: "
                f"{r.allowance_note})" if r.allowance_note else "")),
              (f"  position: max {r.max_position:.3g} m ({r.max_position_percent:.3g} % of "
               f"height), rms {r.rms_position:.3g} m"),
              f"  rotation: max {r.max_angle:.3g} deg, rms {r.rms_angle:.3g} deg"]
-    if r.first_frame is not None:
-        lines.append(f"  first frame past tolerance: {r.first_frame} (t = {r.first_time:.3f} s)")
+    if r.first_frame is not None:  # numbered as in the exports, as a TD finds it in a DCC
+        lines.append(f"  first frame past tolerance: {r.frame_start + r.first_frame} "
+                     f"(t = {r.first_time:.3f} s)")
     if r.worst and (r.max_position > 0 or r.max_angle > 0):
         lines.append("  worst segments:")
         for w in r.worst:
             lines.append(f"    {w.tree} {w.path} (segment {w.segment}): {w.max_position:.3g} m, "
-                         f"{w.max_angle:.3g} deg, worst at frame {w.frame}")
+                         f"{w.max_angle:.3g} deg, worst at frame {r.frame_start + w.frame}")
     if r.twig_differences:
         lines.append("  twigs (drawn, not simulated) differ at rest:")
         lines += [f"    {line}" for line in r.twig_differences]

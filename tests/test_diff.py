@@ -38,7 +38,18 @@ def test_a_single_perturbed_segment_in_one_frame_is_found(bake):
     assert top.max_position == pytest.approx(0.004, rel=1e-3)
     assert len([w for w in r.worst if w.max_position > 1e-9]) == 1  # nothing else moved
     text = format_report(r)
-    assert "DIFFERENT" in text and tree.paths[seg] in text and f"frame {frame}" in text
+    # frames numbered as in the exports (frame_start + index: the number a
+    # TD finds in the DCC), the index and frame_start in the report itself
+    start = int(bake.meta.get("frame_start", 1))
+    assert r.frame_start == start == 1
+    assert "DIFFERENT" in text and tree.paths[seg] in text
+    assert f"worst at frame {start + frame}\n" in text + "\n"
+    assert f"first frame past tolerance: {start + frame} (t = {bake.times[frame]:.3f} s)" in text
+    assert f"x {len(bake.times)} frames (1-{len(bake.times)}, as in the exports)" in text
+    numbered = copy.copy(bake)  # the module's bake keeps its meta
+    numbered.meta = {**bake.meta, "frame_start": 101}
+    later = format_report(diff_bakes(numbered, other, position_tolerance=1e-3))
+    assert f"first frame past tolerance: {101 + frame} " in later
 
 
 def test_rotation_changes_are_measured_in_degrees(bake):

@@ -25,7 +25,7 @@ def test_regenerate_shows_the_diff_and_asks_before_replacing(tmp_path, monkeypat
     capsys.readouterr()
     assert regenerate.regenerate("sapling-box", False, ask=lambda q: "n") == "kept"
     out = capsys.readouterr().out
-    assert "DIFFERENT" in out and "first frame past tolerance: 5" in out
+    assert "DIFFERENT" in out and "first frame past tolerance: 6" in out  # frame 5 (0-based): 6
     assert golden.read_bytes() == before  # not overwritten
     assert regenerate.regenerate("sapling-box", False, ask=lambda q: "y") == "replaced"
     assert golden.read_bytes() != before
