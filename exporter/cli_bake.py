@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .cli_grammar import warn_grammar_files
 from .cli_progress import plural, progress_bar, stage_progress
-from .errors import InputError
+from .errors import InputError, SceneError
 from .fileio import output_folder
 from .library import resolve
 from .resources import DEFAULT_MAX_SEGMENTS, Budget, parse_size
@@ -34,7 +34,16 @@ def load_job(path: str, args):
     overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
                                    ("seed", args.seed), ("quality", args.quality),
                                    ("wind.speed", args.wind)) if v is not None}
-    return load(p, overrides)
+    try:
+        return load(p, overrides)
+    except SceneError as exc:  # a flag's value is the flag's error, not the file's
+        if exc.key in overrides and exc.message.startswith("= "):
+            raise InputError(f"{FLAGS[exc.key]} {exc.message[2:]}") from None
+        raise
+
+
+FLAGS = {"duration": "--duration", "fps": "--fps", "seed": "--seed", "quality": "--quality",
+         "wind.speed": "--wind"}  # scene key -> the `bake` flag that overrides it
 
 
 def _parse_timestep(text: str) -> float:

@@ -49,13 +49,18 @@ class Key:
         """"[0, 3600]" style, as in error messages (inf for unbounded)."""
         lo = -math.inf if self.lo is None else self.lo
         hi = math.inf if self.hi is None else self.hi
-        return f"[{lo:g}, {hi:g}]"
+        return f"[{_bound(lo)}, {_bound(hi)}]"
 
     def out_of_range(self, value) -> str:
         """The error message for a value outside the range (without the key)."""
         unit = f" {self.unit}" if self.unit and self.unit not in ("–",) else ""
         shown = f"{value:g}" if isinstance(value, float) else repr(value)
         return f"= {shown} is out of range {self.range_text()}{unit}"
+
+
+def _bound(x: float) -> str:
+    """A range's end as written: an integer whole (2^63 - 1 not as 9.22337e+18)."""
+    return str(x) if isinstance(x, int) and not isinstance(x, bool) else f"{x:g}"
 
 
 def table(*keys: Key) -> dict[str, Key]:

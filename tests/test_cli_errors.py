@@ -112,8 +112,28 @@ def test_summary_lines_in_order_naming_every_file_or_sequence(root, tmp_path):
 
 def test_negative_duration_reads_as_a_sentence(root):
     r = run("bake", root / SAPLING, "--duration", "-5")
-    assert r.returncode == 2 and "duration = -5 is out of range [0, 3600] s" in r.stderr
+    assert r.returncode == 2 and "--duration -5 is out of range [0, 3600] s" in r.stderr
     assert ": =" not in r.stderr
+
+
+@pytest.mark.parametrize("flag, value, message", [
+    ("--fps", "-1", "--fps -1 is out of range [1, 1000] 1/s"),
+    ("--seed", "-1", "--seed -1 is out of range [0, 9223372036854775807]"),
+    ("--wind", "500", "--wind 500 is out of range [0, 120] m/s"),
+])
+def test_a_flag_out_of_range_is_the_flags_error_not_the_files(flag, value, message, capsys):
+    """A flag's bad value named the scene or grammar file (`demo.toml: fps =
+    -1 ...`) though the file holds no such value."""
+    assert main(["bake", "preset:demo", flag, value]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "demo.toml" not in err, err
+
+
+def test_a_files_own_bad_value_still_names_the_file(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text('duration = -5\n[[tree]]\ngrammar = "sapling"\n')
+    assert main(["bake", str(scene), "--fps", "12"]) == 2
+    assert f"{scene}: duration = -5 is out of range [0, 3600] s" in capsys.readouterr().err
 
 
 COMMANDS = ["derive", "inspect", "bake", "export", "preview", "diff", "batch", "sway", "list",
