@@ -33,6 +33,15 @@ __all__ = ["ACCURACY_SCENARIOS", "ACCURACY_SPECIES", "COMMANDS", "EXAMPLES", "ST
 
 def main(argv: list[str] | None = None) -> int:
     _closed_streams_to_devnull()
+    stderr = sys.stderr
+    sys.stderr = _LogStream(stderr)
+    try:
+        return _run(argv)
+    finally:
+        sys.stderr = stderr
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -58,6 +67,43 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "verbose", False):
         print(f"done in {time.perf_counter() - start:.2f} s", file=sys.stderr)
     return code
+
+
+class _LogStream:
+    """stderr for the log and progress lines: a reader that left (`bake ...
+    2>&1 | head -1`) stops the lines, not the work (the bake was lost, exit
+    141); what would follow goes to /dev/null. stdout keeps its BrokenPipe
+    (exit 141 once the work is done): its report was the point."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._to_devnull()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._to_devnull()
+
+    def _to_devnull(self) -> None:
+        import os
+
+        try:  # the stream's own descriptor too: its buffer flushes at exit without an error
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+            self._stream.flush()
+        except (OSError, ValueError):
+            self._stream = open(os.devnull, "w", encoding="utf-8")
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
 
 
 def _closed_streams_to_devnull() -> None:

@@ -312,3 +312,22 @@ def test_counts_and_tolerances_out_of_range_are_refused(args, message, small_bak
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err, err
     assert not (tmp_path / "sapling").exists() and not (tmp_path / "j").exists()
+
+
+def test_a_log_reader_that_leaves_does_not_stop_the_bake(root, tmp_path):
+    """`bake ... 2>&1 | head -1` killed the bake with the first progress
+    line after head left (exit 141, no .npz); the lines stop, the work not."""
+    proc = subprocess.Popen([sys.executable, "-m", "treebake.cli", "bake", str(root / SAPLING),
+                             *QUICK, "--out", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    proc.stdout.readline()  # the first line, then the reader is gone
+    proc.stdout.close()
+    assert proc.wait(timeout=300) == 141  # the summary line had nowhere to go
+    assert (tmp_path / "sapling" / "sapling.npz").is_file()
+    # the log's reader gone from the start, the report's still there: exit 0
+    log_gone = subprocess.Popen([sys.executable, "-m", "treebake.cli", "bake",
+                                 str(root / SAPLING), *QUICK, "--out", str(tmp_path / "b")],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    log_gone.stderr.close()
+    report = log_gone.stdout.read()
+    assert log_gone.wait(timeout=300) == 0 and report.startswith(b"baked 1 tree"), report
