@@ -20,6 +20,7 @@ from .cli_parser import (
     EXAMPLES,
     STABILITY_CASES,
     build_parser,
+    unknown_arguments,
 )
 from .cli_suites import cmd_accuracy, cmd_stability
 from .cli_tree import cmd_derive, cmd_inspect, cmd_list, cmd_sway, inspect_summary
@@ -43,7 +44,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(argv: list[str] | None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # the command's own usage and error, not the top level's
+        command = getattr(args, "command_parser", parser)
+        command.error(unknown_arguments(command, extra))
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

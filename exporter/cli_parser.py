@@ -375,5 +375,19 @@ def build_parser() -> argparse.ArgumentParser:
                     group.add_argument(*o.flags, **o.settings)
             else:
                 p.add_argument(*argument.flags, **argument.settings)
-        p.set_defaults(func=command.run, **command.defaults)
+        p.set_defaults(func=command.run, command_parser=p, **command.defaults)
     return parser
+
+
+def unknown_arguments(parser: argparse.ArgumentParser, extra: list[str]) -> str:
+    """argparse's error for arguments `parser` does not take, with the
+    closest of its options for each unknown one ("did you mean --format?")."""
+    import difflib
+
+    known = [o for a in parser._actions for o in a.option_strings]
+    hints = []
+    for token in extra:
+        if token.startswith("-"):
+            close = difflib.get_close_matches(token.split("=", 1)[0], known, n=1)
+            hints += [f"{token}: did you mean {close[0]}?"] if close else []
+    return "unrecognized arguments: " + " ".join(extra) + "".join(f"; {h}" for h in hints)

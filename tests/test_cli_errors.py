@@ -331,3 +331,15 @@ def test_a_log_reader_that_leaves_does_not_stop_the_bake(root, tmp_path):
     log_gone.stderr.close()
     report = log_gone.stdout.read()
     assert log_gone.wait(timeout=300) == 0 and report.startswith(b"baked 1 tree"), report
+
+
+def test_an_unknown_flag_gets_the_commands_usage_and_the_closest_flag(capsys):
+    """`bake sapling --fomat glb` printed the top level's usage
+    (`treebake [-h] [--version] COMMAND ...`) and no hint."""
+    with pytest.raises(SystemExit) as stop:
+        main(["bake", "sapling", "--fomat", "glb"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: treebake bake ") and "COMMAND ..." not in err
+    assert "treebake bake: error: unrecognized arguments: --fomat glb; " \
+           "--fomat: did you mean --format?" in err
