@@ -95,7 +95,7 @@ def stale_reason(job: Job, out: Path, fingerprint: ResumeFingerprint | None = No
         return "job.json unreadable"
     fingerprint = fingerprint or resume_fingerprint(job)
     if data.get("hash") != fingerprint.hash:
-        return _changed(data, fingerprint)
+        return _changed(data, fingerprint, job)
     files = data.get("files")
     if not isinstance(files, list) or not files or not all(isinstance(f, dict) for f in files):
         return "job.json has no output checksums (older treebake)"
@@ -112,19 +112,49 @@ def stale_reason(job: Job, out: Path, fingerprint: ResumeFingerprint | None = No
     return None
 
 
-def _changed(record: dict, now: ResumeFingerprint) -> str:
+def _changed(record: dict, now: ResumeFingerprint, job: Job) -> str:
     """Why a job.json's hash is not `now.hash`: the library versions that
-    changed (and whether anything else did too), else inputs or code."""
+    changed, the settings, input files and code that did (what job.json
+    records of them), else "inputs, settings or treebake's code"."""
     recorded = record.get("versions")
     if not isinstance(recorded, dict):
         return "job.json records no library versions (older treebake)"
-    changes = version_changes(recorded, now.versions)
-    if not changes:
-        return "inputs, settings or treebake's code changed"
-    why = "; ".join(_version_reason(c) for c in changes)
+    why = [_version_reason(c) for c in version_changes(recorded, now.versions)]
     if record.get("hash") != now.with_versions(recorded).hash:
-        why += "; and inputs, settings or treebake's code changed"
-    return why
+        what = _what_changed(record, now, job)
+        why.append(what or "inputs, settings or treebake's code changed")
+    return "; ".join(why)
+
+
+def _what_changed(record: dict, now: ResumeFingerprint, job: Job) -> str:
+    """The settings ("wind 9.0 -> 10.0"), input files and code that differ
+    from what job.json records ("" where it records none of them)."""
+    out = []
+    before = record.get("job")
+    if isinstance(before, dict):
+        after = asdict(job)
+        out += [f"{k} {before.get(k)!r} -> {after[k]!r}" for k in sorted(after)
+                if k not in ("name", "scheduler") and _plain(before.get(k)) != _plain(after[k])]
+    files = record.get("input_files")
+    if isinstance(files, dict):
+        current = input_files(job)
+        out += [f"{Path(p).name} changed" for p in sorted(set(files) | set(current))
+                if files.get(p) != current.get(p)]
+    if record.get("code") not in (None, now.code):
+        out.append("treebake's code changed")
+    return "; ".join(out)
+
+
+def _plain(value: Any) -> Any:
+    """A job setting as JSON reads it back (tuples as lists)."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+def input_files(job: Job) -> dict[str, str]:
+    """Each file the job reads (path) -> the sha256 of its content."""
+    import hashlib
+
+    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in job.inputs()}
 
 
 def _version_reason(change: VersionChange) -> str:
@@ -188,6 +218,7 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             frames, segments = len(bake.times), sum(t.n_segments for t in bake.trees)
             record = {"tool": f"treebake {__version__}", "job": asdict(job),
                       "hash": fingerprint.hash, "versions": fingerprint.versions,
+                      "code": fingerprint.code, "input_files": input_files(job),
                       "files": records, "frames": frames, "segments": segments}
             write_text(folder / "job.json", json.dumps(record, indent=2, sort_keys=True) + "\n")
             redone = "" if reason in ("not run yet", "forced") else f"redone: {reason}"

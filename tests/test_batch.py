@@ -292,7 +292,26 @@ def test_a_version_change_with_another_change_says_both(tmp_path, root, monkeypa
     r = run_batch(jobs, out, workers=1)[0]
     assert r.status == "done"
     assert r.message == (f"redone: made with numpy {here['numpy']}, this install has 9.9; "
-                         "and inputs, settings or treebake's code changed")
+                         "sapling.lsys changed")
+
+
+def test_a_rerun_says_which_setting_input_or_code_changed(tmp_path, root, monkeypatch):
+    """'redone: inputs, settings or treebake's code changed' named none of
+    them: now the settings (old -> new), the input files and the code."""
+    import treebake.batch as batch
+
+    grammar = tmp_path / "sapling.lsys"
+    grammar.write_text((root / SAPLING).read_text())
+    body = ONE.replace("ROOT/grammars/sapling.lsys", str(grammar))
+    out = tmp_path / "out"
+    assert run_batch(load_jobs(job_file(tmp_path, root, body)), out, workers=1)[0].status == "done"
+    windy = load_jobs(job_file(tmp_path, root, body + "wind = 9.0\n"))
+    r = run_batch(windy, out, workers=1)[0]
+    assert r.message == "redone: wind None -> 9.0", r.message
+    grammar.write_text(grammar.read_text() + "\n# edited\n")
+    monkeypatch.setattr(batch, "code_fingerprint", lambda: "0" * 64)
+    r = run_batch(windy, out, workers=1)[0]
+    assert r.message == "redone: sapling.lsys changed; treebake's code changed", r.message
 
 
 def test_outputs_of_an_older_treebake_without_versions_are_redone(tmp_path, root):
