@@ -17,14 +17,17 @@ BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is f
 
 
 def cmd_diff(args) -> int:
-    from .diff import diff_bakes, exit_code, format_report, load_any, plot_report
+    from .diff import TopologyError, diff_bakes, exit_code, format_report, load_any, plot_report
 
     for flag, value in (("--position-tolerance", args.position_tolerance),
                         ("--angle-tolerance", args.angle_tolerance)):
         if not value >= 0.0:  # NaN too
             raise InputError(f"{flag} must be >= 0, got {value}")
     a, b = load_any(args.a), load_any(args.b)
-    report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)
+    try:
+        report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)
+    except TopologyError as exc:  # which two files, A and B in its text
+        raise TopologyError(f"{args.a} (A) and {args.b} (B) {exc}") from None
     if args.plot:
         plot_report(report, a.times, args.plot)
     if args.json:

@@ -224,7 +224,8 @@ COMMANDS: tuple[Command, ...] = (
     Command(
         "diff", cmd_diff, "compare two bakes (or glTF exports): which motion changed",
         "Compare two bakes (.npz) or two exported glTF files. Exit 0: within tolerance; 1: "
-        "the motion differs; 2: not the same trees (or bad input).",
+        "the motion differs; 2: not comparable frame by frame (other trees, segments or frames) "
+        "or bad input.",
         (opt("a", help="first bake (.npz, .glb, .gltf)"), opt("b", help="second bake"),
          opt("--position-tolerance", type=float, default=1e-3,
              help="largest allowed position difference, m (default 0.001)"),

@@ -149,7 +149,8 @@ def check_topology(a: Bake, b: Bake) -> None:
     (reads each tree's info and parents only, not its motion)."""
     problems = []
     if len(a.times) != len(b.times):
-        problems.append(f"frame counts differ: {len(a.times)} vs {len(b.times)}")
+        problems.append(f"frame counts differ: {len(a.times)} vs {len(b.times)} "
+                        f"({a.times[-1]:.3f} vs {b.times[-1]:.3f} s: another duration or fps?)")
     elif not np.allclose(a.times, b.times, atol=1e-6):
         problems.append("frame times differ (another fps?)")
     info_a = [tree_info(a.trees, i) for i in range(len(a.trees))]
@@ -173,7 +174,7 @@ def check_topology(a: Bake, b: Bake) -> None:
                 problems.append(f"tree {name!r}: segment {s} ({paths[s]}) hangs on "
                                 f"{pa[s]} in A, {pb[s]} in B")
     if problems:
-        raise TopologyError("not the same trees: " + "; ".join(problems))
+        raise TopologyError("cannot be compared frame by frame: " + "; ".join(problems))
 
 
 def _tree_errors(ta: TreeBake, tb: TreeBake, frames: int) -> tuple[np.ndarray, np.ndarray]:

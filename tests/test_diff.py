@@ -84,6 +84,22 @@ def test_topology_mismatch_says_what_differs(bake, root):
         diff_bakes(bake, shorter)
 
 
+def test_bakes_of_other_lengths_are_named_and_told_apart_by_their_times(bake, tmp_path, capsys):
+    """It said 'not the same trees: frame counts differ: 49 vs 73' for the
+    same trees baked for 2 and 3 s, and named neither file."""
+    shorter = copy.deepcopy(bake)
+    shorter.times, shorter.trees = shorter.times[:-2], copy.deepcopy(bake.trees)
+    for t in shorter.trees:
+        t.positions, t.rotations = t.positions[:-2], t.rotations[:-2]
+    a, b = save_bake(bake, tmp_path / "a.npz"), save_bake(shorter, tmp_path / "b.npz")
+    assert main(["diff", str(a), str(b)]) == 2
+    err = capsys.readouterr().err
+    n = len(bake.times)
+    assert f"{a} (A) and {b} (B) cannot be compared frame by frame: frame counts differ: " \
+           f"{n} vs {n - 2} ({bake.times[-1]:.3f} vs {bake.times[-3]:.3f} s" in err, err
+    assert "same trees" not in err
+
+
 def test_cli_exit_codes_json_and_plot(bake, root, tmp_path, capsys):
     a = save_bake(bake, tmp_path / "a.npz")
     assert main(["diff", str(a), str(a)]) == 0
