@@ -61,7 +61,9 @@ def summary(events_by_tree: dict[str, list[Event]]) -> list[str]:
     return lines
 
 
-_WHAT = {BROKE: ("joint broke", "joints broke"), UPROOTED: ("uprooted", "uprooted"),
+# uprooted: its root joint broke, which the bake's count of broken joints includes
+_WHAT = {BROKE: ("joint broke", "joints broke"),
+         UPROOTED: ("uprooted (its root joint broke)", "uprooted (their root joints broke)"),
          CUT: ("cut", "cut"), HINGE: ("hinge snapped", "hinges snapped"),
          AT_REST: ("at rest", "at rest"), TIER: ("changed engine", "changed engine")}
 

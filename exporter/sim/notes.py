@@ -17,6 +17,17 @@ from .solver import SolveResult, frame_timing
 SMALLEST = ("step", "substep", "force_interval", "stability")  # per run: the finest
 
 
+# the reference's description of its model, the same on every bake that uses
+# it (reference/solver.engine_notes' first two): the bake's notes keep it, its
+# log does not repeat it
+DESCRIPTIONS = ("reference: MuJoCo ", "reference: joints are two perpendicular hinges")
+
+
+def log_lines(notes: list[str]) -> list[str]:
+    """The notes a bake's log shows: all but the model's description."""
+    return [n for n in notes if not n.startswith(DESCRIPTIONS)]
+
+
 def solve_result(trees: list[SimTree], plan: list[tuple[Quality, list[int]]], results: list,
                  scene: Scene) -> SolveResult:
     """The planar LOD's SolveResult from its chunks' results (scheduler.

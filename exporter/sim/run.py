@@ -9,6 +9,7 @@ from ..errors import InputError
 from ..scene import Scene
 from .audit import AuditedSink, gain_notes
 from .events import summary
+from .notes import log_lines
 from .rigging import RiggedScene
 from .solver import Solver, SolveResult, TreeSink
 
@@ -72,7 +73,7 @@ def simulate(kind: SolverKind, rigged: RiggedScene, scene: Scene, workers: int =
     result.notes = result.notes + gain_notes(sink.energy)
     if on_tree is None:  # kept for the caller, in the order they came
         result.motions = sink.kept
-    for line in summary(sink.events) + result.notes:
+    for line in summary(sink.events) + log_lines(result.notes):
         log(line)
     return result
 
