@@ -91,8 +91,8 @@ def stage_progress():
 
 
 def plural(n: int, word: str) -> str:
-    """'1 tree', '2 trees'."""
-    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+    """'1 tree', '2 trees', '28,334 segments'."""
+    return f"{n} {word}" if n == 1 else f"{n:,} {word}s"
 
 
 class BatchDisplay:

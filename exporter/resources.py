@@ -57,7 +57,8 @@ class Estimate:
 
     def line(self) -> str:
         """The plan line's figures."""
-        return (f"estimated: {self.animated:,} animated segments x {self.frames} frames: "
+        frames = f"{self.frames} frame{'' if self.frames == 1 else 's'}"
+        return (f"estimated: {self.animated:,} animated segments x {frames}: "
                 f"peak memory about {mib(self.memory)}, bake {mib(self.disk)} on disk")
 
 
