@@ -133,7 +133,7 @@ def cmd_bake(args) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
-        print(f"baked {plural(summary['trees'], 'tree')} ({summary['simulated']} simulated, "
+        print(f"baked {plural(summary['trees'], 'tree')} ({summary['simulated']:,} simulated, "
               f"{plural(summary['segments'], 'segment')}), {plural(summary['frames'], 'frame')}"
               f" in {summary['wall_seconds']:.1f} s -> {path}")
         if exported is not None:
