@@ -63,8 +63,9 @@ def _summary(path: Path, grammar: bool) -> str:
         if not line.startswith("#"):
             break
         lines.append(line.lstrip("#").strip())
-    first = re.split(r"\.\s", " ".join(lines), maxsplit=1)[0].rstrip(".")
-    return first if len(first) <= 100 else first[:99].rstrip() + "…"
+    # a sentence ends at ". " before a capital ("p. 25" and "e.g. the" do not end one)
+    first = re.split(r"(?<!\b[a-z])\.\s+(?=[A-Z])", " ".join(lines), maxsplit=1)[0]
+    return first.rstrip(".")  # whole: `list --json` carries it, `list` shortens it to read
 
 
 def grammars() -> list[Entry]:

@@ -110,3 +110,18 @@ def test_a_preset_bake_records_its_grammars_as_before():
     scene = load_scene(library.preset_path("boxes"))
     assert {g.grammar for g in grow(scene)} == {"../grammars/sapling.lsys",
                                                 "../grammars/oak.lsys"}
+
+
+def test_a_presets_description_is_its_whole_first_sentence(tmp_path, monkeypatch, capsys):
+    """`list --json` cut descriptions at 100 characters with an ellipsis, and
+    a sentence ended at "p. 25": the JSON carries the whole first sentence."""
+    monkeypatch.setattr(library, "presets_folder", lambda: tmp_path)
+    (tmp_path / "long.toml").write_text(
+        "# Two oaks after Niklas (1992, p. 25), e.g. in a gale whose gusts reach the crowns of "
+        "every tree in the stand, then calm. Not this sentence.\nname = \"long\"\n")
+    [entry] = library.presets()
+    assert entry.description == (
+        "Two oaks after Niklas (1992, p. 25), e.g. in a gale whose gusts reach the crowns of "
+        "every tree in the stand, then calm")
+    assert main(["list", "presets", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)[0]["description"] == entry.description
