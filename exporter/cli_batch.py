@@ -17,12 +17,15 @@ BUSY_EXIT = 75  # sysexits.h EX_TEMPFAIL: nothing failed, but not every job is f
 
 
 def cmd_diff(args) -> int:
-    from .diff import TopologyError, diff_bakes, exit_code, format_report, load_any, plot_report
+    from .diff import (TopologyError, diff_bakes, exit_code, format_report, load_any,
+                       plot_report, require_plots)
 
     for flag, value in (("--position-tolerance", args.position_tolerance),
                         ("--angle-tolerance", args.angle_tolerance)):
         if not value >= 0.0:  # NaN too
             raise InputError(f"{flag} must be >= 0, got {value}")
+    if args.plot:  # before the comparison, not after it
+        require_plots()
     a, b = load_any(args.a), load_any(args.b)
     try:
         report = diff_bakes(a, b, args.position_tolerance, args.angle_tolerance, args.worst)

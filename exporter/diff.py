@@ -366,15 +366,24 @@ def format_report(r: DiffReport, name_a: str = "A", name_b: str = "B") -> str:
     return "\n".join(lines)
 
 
-def plot_report(r: DiffReport, times: np.ndarray, path: str | Path) -> Path:
-    """PNG of the worst segments' position and rotation error over time."""
-    try:
-        import matplotlib
+def require_plots() -> None:
+    """InputError unless matplotlib imports (--plot: asked before comparing)."""
+    import importlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+    try:
+        importlib.import_module("matplotlib")
     except ImportError:
         raise InputError("--plot needs matplotlib: pip install 'treebake[plots]'") from None
+
+
+def plot_report(r: DiffReport, times: np.ndarray, path: str | Path) -> Path:
+    """PNG of the worst segments' position and rotation error over time."""
+    require_plots()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     from .fileio import atomic_path
 
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)

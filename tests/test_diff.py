@@ -432,3 +432,18 @@ def test_diff_memory_follows_the_tree_not_the_shot(bake, tmp_path):
         peaks.append(tracemalloc.get_traced_memory()[1])
         tracemalloc.stop()
     assert peaks[1] < 1.5 * peaks[0], peaks
+
+
+def test_plot_without_matplotlib_is_refused_before_comparing(bake, tmp_path, monkeypatch, capsys):
+    """--plot without the extra: the error before the two bakes are read and
+    compared (it came after the whole comparison), naming the extra."""
+    import sys
+
+    import treebake.diff as diff
+
+    a = save_bake(bake, tmp_path / "a.npz")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if not installed
+    monkeypatch.setattr(diff, "diff_bakes", lambda *a, **k: pytest.fail("compared first"))
+    assert main(["diff", str(a), str(a), "--plot", str(tmp_path / "d.png")]) == 2
+    assert "--plot needs matplotlib: pip install 'treebake[plots]'" in capsys.readouterr().err
+    assert not (tmp_path / "d.png").exists()
