@@ -96,6 +96,8 @@ def load_any(path: str | Path) -> Bake:
     exported glTF (.glb/.gltf) read back as a bake; a file listed in a
     manifest.json beside it is checked against its sha256."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a bake (.npz) or glTF export (.glb, .gltf)")
     if not p.is_file():
         raise InputError(f"{p}: file not found")
     if p.suffix.lower() in (".glb", ".gltf"):

@@ -94,8 +94,9 @@ def parse_formats(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
         if f in ALIASES:
             continue
         if f not in FORMATS:
+            how = " (comma-separated)" if isinstance(text, str) else ""
             raise InputError(f"unknown export format {raw!r}; choose from: "
-                             f"{', '.join(FORMATS)} (comma-separated)")
+                             f"{', '.join(FORMATS)}{how}, or npz (the bake itself)")
         if f not in out:
             out.append(f)
     return tuple(out)

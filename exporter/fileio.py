@@ -76,8 +76,12 @@ def write_text(path: str | Path, text: str) -> Path:
 
 def _make_writable(p: Path) -> None:
     """mkdir -p, then write and delete a probe file; OSError as it comes."""
-    if p.exists() and not p.is_dir():
-        raise NotADirectoryError(20, "it is a file, not a folder")
+    for q in (p, *p.parents):  # the nearest that exists: a file there is no folder to write in
+        if q.exists():
+            if not q.is_dir():
+                raise NotADirectoryError(20, "it is a file, not a folder" if q == p
+                                         else f"{q} is a file, not a folder")
+            break
     p.mkdir(parents=True, exist_ok=True)
     fd, probe = tempfile.mkstemp(prefix=".treebake-probe.", suffix=".tmp", dir=p)
     os.close(fd)

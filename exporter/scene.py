@@ -214,6 +214,10 @@ def load_scene(path: str | Path, overrides: dict | None = None) -> Scene:
     (and `wind.speed`) before validation, so they are checked the same way
     (keys' times against the file's own duration: key_horizon)."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a scene file")
+    if not p.exists():
+        raise InputError(f"{p}: scene file not found")
     try:
         data = p.read_bytes()
     except OSError as exc:

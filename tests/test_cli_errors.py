@@ -343,3 +343,24 @@ def test_an_unknown_flag_gets_the_commands_usage_and_the_closest_flag(capsys):
     assert err.startswith("usage: treebake bake ") and "COMMAND ..." not in err
     assert "treebake bake: error: unrecognized arguments: --fomat glb; " \
            "--fomat: did you mean --format?" in err
+
+
+def test_paths_that_are_not_what_a_command_takes_say_what_they_are(tmp_path, capsys):
+    """A folder given to diff said 'file not found'; an output folder under a
+    file said 'Not a directory'; a job file's list of formats was called
+    comma-separated and npz was missing from the choices."""
+    wall = tmp_path / "afile"
+    wall.write_text("x")
+    jobs = tmp_path / "jobs.toml"
+    jobs.write_text('[[job]]\ngrammar = "sapling"\nformats = ["xyz"]\n')
+    cases = [(["diff", str(tmp_path), str(tmp_path)],
+              f"{tmp_path}: is a folder, not a bake (.npz) or glTF export (.glb, .gltf)"),
+             (["bake", "sapling", "--out", str(wall / "x"), "--duration", "0.1"],
+              f"{wall} is a file, not a folder"),
+             (["bake", str(tmp_path / "none.toml")], "none.toml: scene file not found"),
+             (["batch", str(jobs)], "choose from: glb, gltf, obj, usd, usda, abc, preview, "
+                                    "or npz (the bake itself)")]
+    for args, message in cases:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert message in err and "comma" not in err, err

@@ -4,7 +4,7 @@ name the file, the key, the value and the allowed range."""
 import numpy as np
 import pytest
 from conftest import PRESETS
-from treebake.errors import SceneError
+from treebake.errors import InputError, SceneError
 from treebake.scene import BEAUFORT, load_scene, parse_scene
 
 SAPLING = str(PRESETS.parent / "grammars" / "sapling.lsys")
@@ -98,8 +98,11 @@ def test_load_errors_name_the_file(tmp_path):
     bad.write_text("duration = [")
     with pytest.raises(SceneError, match="bad.toml"):
         load_scene(bad)
-    with pytest.raises(SceneError, match="cannot read scene"):
+    # a missing scene and a folder say so, as a missing grammar does
+    with pytest.raises(InputError, match=r"none\.toml: scene file not found$"):
         load_scene(tmp_path / "none.toml")
+    with pytest.raises(InputError, match="is a folder, not a scene file"):
+        load_scene(tmp_path)
 
 
 def test_a_scene_names_bundled_grammars_as_the_command_line_does(tmp_path):
