@@ -31,11 +31,9 @@ import numpy as np
 from .errors import InputError
 from .model import Twigs
 from .rotations import angle_between, qrotate
+from .sampling import FAST_TURN_DEG
 
 _EXTRAS = ("extra_times", "extra_positions", "extra_rotations")
-# degrees: a segment turning more than this between two frames is fast there;
-# the simulation records sub-frame samples for it, the exporters keep them
-FAST_TURN_DEG = 45.0
 
 
 @dataclass

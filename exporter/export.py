@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import __version__
-from .bake import FAST_TURN_DEG, Bake
+from .bake import Bake
 from .bake_file import StoredTrees, check_finite, tree_info, tree_leaf_fields
 from .errors import InputError, TreebakeError
 from .exchange.anim import ReduceOptions
@@ -23,6 +23,7 @@ from .exchange.textures import TextureMap
 from .exchange.mesh import DETAIL, MeshOptions, TreeMesh, part_materials_of
 from .fileio import atomic_path, write_bytes, write_text
 from .heap import keep_heap_top
+from .sampling import FAST_TURN_DEG
 from .tree_meshes import TreeFacts, TreeMeshes
 
 FORMATS = ("glb", "gltf", "obj", "usd", "usda", "abc", "preview")

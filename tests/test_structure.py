@@ -63,3 +63,17 @@ def test_following_a_bakes_data_re_enters_modules_at_most_14_times():
     layer = flow.layers(flow.import_graph(flow.package_modules(treebake), "facade"), "height")
     measured = flow.measure(walk, layer)
     assert measured["reentries"] <= 14, measured
+
+
+OUTPUT_STAGE = ("treebake.bake", "treebake.bake_file", "treebake.export", "treebake.exchange")
+
+
+def test_the_simulation_does_not_import_the_output_stage():
+    """Issue 38: `sim/` does not import the output stage (bake.py imported
+    into sim/common.py for one constant: now sampling.py, which both read)."""
+    flow = _flow()
+    graph = flow.import_graph(flow.package_modules(treebake), "facade")
+    wrong = {m: sorted(d for d in deps if d.startswith(OUTPUT_STAGE))
+             for m, deps in graph.items() if m.startswith("treebake.sim")}
+    assert not any(wrong.values()), {m: d for m, d in wrong.items() if d}
+    assert any(m.startswith("treebake.sim.") for m in graph)  # the graph holds sim's modules

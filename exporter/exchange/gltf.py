@@ -32,10 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..bake import FAST_TURN_DEG, Bake
+from ..bake import Bake
 from ..bake_file import tree_info
 from ..fileio import write_bytes
 from ..names import joint_names
+from ..sampling import FAST_TURN_DEG
 from .anim import Animation, ReduceOptions, animate, subtree_reach
 from .axes import points_y_up, quats_y_up
 from .mesh import TreeMesh, object_mesh

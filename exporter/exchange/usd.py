@@ -8,7 +8,7 @@ framesPerSecond = the bake's fps, startTimeCode = frame_start, endTimeCode =
 frame_start + frames - 1 (time code = frame_start + bake time x fps: frame
 numbers like the OBJ sequence's; extra sub-frame samples get fractional
 codes, on a skeleton only inside the frame intervals where one of its
-joints turns more than bake.FAST_TURN_DEG), defaultPrim = the job's root
+joints turns more than sampling.FAST_TURN_DEG), defaultPrim = the job's root
 Xform. Joints carry the glTF joint names (names.py, `oak_trunk_2_1_s3`)
 in a path hierarchy that follows the segments; the
 original segment paths are in the Skeleton's `treebake:segmentPaths`

@@ -8,9 +8,9 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..bake import FAST_TURN_DEG
 from ..rig import Rig
 from ..rotations import cross
+from ..sampling import FAST_TURN_DEG
 from .loads import MAX_ACCELERATION, BoneProps
 
 # rad/s: a bone spinning faster is taken to be unstable (a blast whips real
