@@ -204,7 +204,7 @@ def run_job(job: Job, out: str, force: bool = False, progress=None) -> JobResult
             bake = bake_scene(scene, solver=job.solver, progress=tick,
                               budget=Budget(folder=folder), path=bake_path,
                               scheduler=job.scheduler)
-            remove_exports(folder)  # the previous bake's: a format dropped from the job would stay
+            remove_exports(folder, bake_path.name)  # the previous bake's: a dropped format's stay
             files = [bake_path]
             exports = [f for f in job.formats if f != "npz"]
             if exports:

@@ -111,7 +111,7 @@ def cmd_bake(args) -> int:
         bake = bake_scene(scene, solver=args.solver, log=log, progress=progress,
                           workers=workers, timestep=timestep, budget=budget,
                           scheduler=args.scheduler, path=path)
-        stale = remove_exports(out)  # exported from the bake just replaced
+        stale = remove_exports(out, path.name)  # exported from the bake just replaced
         if stale:
             log(f"removed {plural(stale, 'file')} exported from the previous bake in {out} "
                 "(its manifest.json listed them)")

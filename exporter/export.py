@@ -316,16 +316,20 @@ def export_bake(bake: Bake, out: str | Path = "out", name: str | None = None,
     return ExportReport(folder, manifest, [*files, man])
 
 
-def remove_exports(folder: Path) -> int:
-    """Remove what an export wrote into `folder`: every file its
-    manifest.json lists (inside the folder; never a bake), the manifest,
-    and the subfolders left empty. For a new bake written there: files
-    exported from the previous one would pass for its. Returns the files
-    removed."""
+def remove_exports(folder: Path, bake_file: str) -> int:
+    """Remove what an export of the bake `bake_file` (its file name) wrote
+    into `folder`: every file its manifest.json lists (inside the folder;
+    never a bake), the manifest, and the subfolders left empty. For a new
+    bake written over that file: its exports would pass for the new one's.
+    An export of another bake is left alone. Returns the files removed."""
     manifest = folder / "manifest.json"
     try:
-        listed = [str(f["path"]) for f in json.loads(manifest.read_text())["files"]]
-    except (OSError, ValueError, KeyError, TypeError):
+        record = json.loads(manifest.read_text())
+        listed = [str(f["path"]) for f in record["files"]]
+        source = (record.get("inputs") or {}).get("bake") or {}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return 0
+    if source.get("file") not in (None, bake_file):
         return 0
     root, removed, parents = folder.resolve(), 0, set()
     for rel in listed:

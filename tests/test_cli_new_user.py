@@ -312,3 +312,10 @@ def test_a_new_bake_removes_the_exports_of_the_one_it_replaces(tmp_path, monkeyp
     assert f"removed {len(listed)} files exported from the previous bake" in err, err
     assert sorted(p.name for p in folder.iterdir()) == ["notes.txt", "sapling.npz"]
     assert outside.read_text() == "outside the job folder"
+    # an export of another bake into this folder is not the rebaked one's: it stays
+    other = tmp_path / "other.npz"
+    other.write_bytes((folder / "sapling.npz").read_bytes())
+    assert main(["export", str(other), "--name", "sapling", "--format", "glb", "-q"]) == 0
+    assert main(["bake", "sapling", "--duration", "0.1", "--fps", "10", "--quality", "draft"]) == 0
+    assert "removed" not in capsys.readouterr().err
+    assert (folder / "sapling.glb").is_file() and (folder / "manifest.json").is_file()
