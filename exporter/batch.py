@@ -152,9 +152,9 @@ def _plain(value: Any) -> Any:
 
 def input_files(job: Job) -> dict[str, str]:
     """Each file the job reads (path) -> the sha256 of its content."""
-    import hashlib
+    from .export import sha256
 
-    return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() for p in job.inputs()}
+    return {str(p): sha256(p) for p in job.inputs()}
 
 
 def _version_reason(change: VersionChange) -> str:
@@ -297,17 +297,12 @@ def settle_busy(jobs: list[Job], results: list[JobResult], out: str | Path) -> l
             except (OSError, TreebakeError) as exc:
                 reason = str(exc)
         if reason is None:
-            settled.append(_written_elsewhere(r, root / job.name))
+            settled.append(_skipped(r.name, root / job.name, r.seconds, "written by another run"))
         else:
             settled.append(JobResult(r.name, "failed", r.seconds,
                                      f"another run was writing it and did not finish it "
                                      f"({reason}); rerun to redo it"))
     return settled
-
-
-def _written_elsewhere(r: JobResult, folder: Path) -> JobResult:
-    """A busy job that the other run finished: what its job.json records."""
-    return _skipped(r.name, folder, r.seconds, "written by another run")
 
 
 def _skipped(name: str, folder: Path, seconds: float, message: str) -> JobResult:

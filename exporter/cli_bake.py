@@ -31,9 +31,8 @@ def load_job(path: str, args):
     if p.suffix.lower() not in (".toml", ".lsys"):
         raise InputError(f"{p}: `treebake bake` takes a scene file (.toml), a grammar (.lsys) "
                          "or a bundled name (oak, preset:felling; `treebake list`)")
-    overrides = {k: v for k, v in (("duration", args.duration), ("fps", args.fps),
-                                   ("seed", args.seed), ("quality", args.quality),
-                                   ("wind.speed", args.wind)) if v is not None}
+    overrides = {key: value for key, flag in FLAGS.items()
+                 if (value := getattr(args, flag.removeprefix("--"))) is not None}
     try:
         return load(p, overrides)
     except SceneError as exc:  # a flag's value is the flag's error, not the file's
