@@ -123,12 +123,8 @@ def test_a_layer_usd_cannot_write_is_an_output_error_and_leaves_nothing(tmp_path
             Path(path).write_bytes(b"PXR-USDC half a layer")
             raise pxr.Tf.ErrorException(f"\n\tError in 'WriteToAsset' : '{message}'")
 
-    class Stage:
-        def GetRootLayer(self):
-            return Layer()
-
     w = usd._Writer(preset_bake("calm"), "job")
-    w.stage = Stage()
+    w.layer = Layer()
     target = tmp_path / "job.usd"
     with pytest.raises((OutputError, OSError)) as caught:
         w.save(target)
@@ -147,12 +143,8 @@ def test_a_layer_export_that_reports_failure_leaves_no_empty_file(tmp_path):
     temporary file renamed over the target."""
     from treebake.exchange import usd
 
-    class Stage:
-        def GetRootLayer(self):
-            return type("Layer", (), {"Export": lambda self, path: False})()
-
     w = usd._Writer(preset_bake("calm"), "job")
-    w.stage = Stage()
+    w.layer = type("Layer", (), {"Export": lambda self, path: False})()
     with pytest.raises(OSError, match="USD could not write the layer"):
         w.save(tmp_path / "job.usd")
     assert list(tmp_path.iterdir()) == []

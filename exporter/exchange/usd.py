@@ -50,10 +50,10 @@ def require() -> None:
 
 def _pxr():
     try:
-        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+        from pxr import Gf, Sdf, Tf, Vt
     except ImportError:  # pragma: no cover - depends on the install
         raise TreebakeError(MISSING) from None
-    return Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+    return Gf, Sdf, Tf, Vt
 
 
 @dataclass
@@ -76,29 +76,33 @@ def joint_tokens(parent: np.ndarray, names: list[str]) -> list[str]:
 
 
 class _Writer:
+    """One USD layer authored directly as Sdf specs (no stage: a third of
+    the CPU of the Usd schema API per tree, the same layer): prims,
+    attributes and relationships exactly as the UsdGeom, UsdSkel and
+    UsdShade schemas define them."""
+
     def __init__(self, bake: Bake, name: str, frame_start: int = 1,
                  maps: dict[str, TextureMap] | None = None,
                  kind: str = "assembly") -> None:
-        Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt = _pxr()
-        self.Gf, self.Sdf, self.Usd, self.UsdGeom = Gf, Sdf, Usd, UsdGeom
-        self.UsdShade, self.UsdSkel, self.Vt, self.Tf = UsdShade, UsdSkel, Vt, Tf
+        Gf, Sdf, Tf, Vt = _pxr()
+        self.Gf, self.Sdf, self.Tf, self.Vt = Gf, Sdf, Tf, Vt
+        self.types = Sdf.ValueTypeNames
         self.bake = bake
-        # payloads (tree layers) are not loaded while the stage is written
-        self.stage = Usd.Stage.CreateInMemory(load=Usd.Stage.LoadNone)
-        st = self.stage
-        UsdGeom.SetStageUpAxis(st, UsdGeom.Tokens.y)
-        UsdGeom.SetStageMetersPerUnit(st, 1.0)
-        fps = bake.fps
-        st.SetTimeCodesPerSecond(fps)
-        st.SetFramesPerSecond(fps)
+        self.layer = Sdf.Layer.CreateAnonymous(".usd")
+        info = self.layer.pseudoRoot
+        info.SetInfo("upAxis", "Y")
+        info.SetInfo("metersPerUnit", 1.0)
+        fps = float(bake.fps)
+        info.SetInfo("timeCodesPerSecond", fps)
+        info.SetInfo("framesPerSecond", fps)
         self.frame_start = frame_start
-        st.SetStartTimeCode(float(frame_start))
-        st.SetEndTimeCode(float(frame_start + len(bake.times) - 1))
+        info.SetInfo("startTimeCode", float(frame_start))
+        info.SetInfo("endTimeCode", float(frame_start + len(bake.times) - 1))
         self.root = f"/{self.ident(name)}"
-        root = UsdGeom.Xform.Define(st, self.root)
-        st.SetDefaultPrim(root.GetPrim())
-        Usd.ModelAPI(root.GetPrim()).SetKind(kind)
-        self.materials: dict[str, object] = {}
+        root = self.prim(self.root, "Xform")
+        self.layer.defaultPrim = root.name
+        root.kind = kind
+        self.materials: set[str] = set()
         self.maps = maps or {}  # material -> its textures' paths relative to the file
         self.used: set[str] = {f"{self.root}/Looks", f"{self.root}/Projectiles"}
         self.subframe_codes = 0  # fractional time codes written, summed over skeletons
@@ -115,64 +119,107 @@ class _Writer:
         self.used.add(path)
         return path
 
-    def material(self, name: str, colour) -> object:
-        if name not in self.materials:
-            path = f"{self.root}/Looks/{self.ident(name)}"
-            mat = self.UsdShade.Material.Define(self.stage, path)
-            sh = self.UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
-            sh.CreateIdAttr("UsdPreviewSurface")
-            diffuse = sh.CreateInput("diffuseColor", self.Sdf.ValueTypeNames.Color3f)
-            if name in self.maps:
-                self.texture(path, sh, diffuse, self.maps[name])
-            else:
-                diffuse.Set(self.Gf.Vec3f(*[float(c) for c in colour]))
-            sh.CreateInput("roughness", self.Sdf.ValueTypeNames.Float).Set(0.9)
-            sh.CreateInput("metallic", self.Sdf.ValueTypeNames.Float).Set(0.0)
-            mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
-            self.materials[name] = mat
-        return self.materials[name]
+    def prim(self, path: str, type_name: str = ""):
+        """A `def` prim at `path` (its parent defined already, or a typeless
+        `def` made for it, as UsdStage.DefinePrim does)."""
+        Sdf = self.Sdf
+        parent, name = path.rsplit("/", 1)
+        owner = self.layer.GetPrimAtPath(parent) if parent else self.layer
+        if owner is None:
+            owner = self.prim(parent)
+        return Sdf.PrimSpec(owner, name, Sdf.SpecifierDef, type_name)
+
+    def attr(self, prim, name: str, type_name, value=None, uniform: bool = False,
+             custom: bool = False, **info):
+        """An attribute of `prim` with metadata `info` and default `value`
+        (None: none), authored in the order the schema API authors them."""
+        Sdf = self.Sdf
+        spec = Sdf.AttributeSpec(prim, name, type_name,
+                                 Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying,
+                                 declaresCustom=custom)
+        for key, v in info.items():
+            spec.SetInfo(key, v)
+        if value is not None:
+            spec.default = value
+        return spec
+
+    def connect(self, attr, source, output: str) -> None:
+        """Connect the shader input `attr` to the output `output` of the
+        prim `source`, made with the input's type if it is not there."""
+        if source.attributes.get(f"outputs:{output}") is None:
+            self.attr(source, f"outputs:{output}", attr.typeName)
+        attr.connectionPathList.explicitItems = [source.path.AppendProperty(f"outputs:{output}")]
+
+    def rel(self, prim, name: str, target: str) -> None:
+        """A relationship of `prim` targeting the prim path `target`."""
+        spec = self.Sdf.RelationshipSpec(prim, name, custom=False)
+        spec.targetPathList.explicitItems = [self.Sdf.Path(target)]
+
+    def apply(self, prim, schema: str) -> None:
+        """API `schema` added to the schemas `prim` applies."""
+        ops = prim.GetInfo("apiSchemas") if prim.HasInfo("apiSchemas") else None
+        items = list(ops.prependedItems) if ops is not None else []
+        prim.SetInfo("apiSchemas", self.Sdf.TokenListOp.Create(prependedItems=items + [schema]))
+
+    def material(self, name: str, colour) -> str:
+        """The path of material `name` under the root's Looks, a
+        UsdPreviewSurface, textured where `maps` has it, else `colour`."""
+        path = f"{self.root}/Looks/{self.ident(name)}"
+        if name in self.materials:
+            return path
+        self.materials.add(name)
+        T = self.types
+        mat = self.prim(path, "Material")
+        sh = self.prim(f"{path}/PreviewSurface", "Shader")
+        self.attr(sh, "info:id", T.Token, "UsdPreviewSurface", uniform=True)
+        diffuse = self.attr(sh, "inputs:diffuseColor", T.Color3f)
+        if name in self.maps:
+            self.texture(path, sh, diffuse, self.maps[name])
+        else:
+            diffuse.default = self.Gf.Vec3f(*[float(c) for c in colour])
+        self.attr(sh, "inputs:roughness", T.Float, 0.9)
+        self.attr(sh, "inputs:metallic", T.Float, 0.0)
+        self.connect(self.attr(mat, "outputs:surface", T.Token), sh, "surface")
+        return path
 
     def texture(self, path: str, surface, diffuse, maps: TextureMap) -> None:
         """diffuseColor (and for cutout cards opacity, thresholded at 0.5)
         from a UsdUVTexture reading `maps.path` at the mesh's `st` primvar;
         with a normal map, `normal` from a second UsdUVTexture reading it as
         raw data, scale 2 and bias -1 (tangent space, -1..1)."""
-        Sdf, UsdShade = self.Sdf, self.UsdShade
-        reader = UsdShade.Shader.Define(self.stage, f"{path}/stReader")
-        reader.CreateIdAttr("UsdPrimvarReader_float2")
-        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        T, Gf = self.types, self.Gf
+        reader = self.prim(f"{path}/stReader", "Shader")
+        self.attr(reader, "info:id", T.Token, "UsdPrimvarReader_float2", uniform=True)
+        self.attr(reader, "inputs:varname", T.String, "st")
         cutout = maps.cutout
         tex = self.uv_texture(f"{path}/Texture", maps.path, "sRGB", cutout, reader)
-        diffuse.ConnectToSource(tex.ConnectableAPI(), "rgb")
+        self.connect(diffuse, tex, "rgb")
         if maps.normal is not None:
             nrm = self.uv_texture(f"{path}/NormalTexture", maps.normal, "raw", cutout, reader)
-            nrm.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(2, 2, 2, 1))
-            nrm.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(self.Gf.Vec4f(-1, -1, -1, 0))
-            surface.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
-                nrm.ConnectableAPI(), "rgb")
+            self.attr(nrm, "inputs:scale", T.Float4, Gf.Vec4f(2, 2, 2, 1))
+            self.attr(nrm, "inputs:bias", T.Float4, Gf.Vec4f(-1, -1, -1, 0))
+            self.connect(self.attr(surface, "inputs:normal", T.Normal3f), nrm, "rgb")
         if cutout:
-            surface.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
-                tex.ConnectableAPI(), "a")
-            surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+            self.connect(self.attr(surface, "inputs:opacity", T.Float), tex, "a")
+            self.attr(surface, "inputs:opacityThreshold", T.Float, 0.5)
 
     def uv_texture(self, path: str, file: str, colour_space: str, clamp: bool, reader):
-        """A UsdUVTexture at `path` reading `file` at the reader's `st`."""
-        Sdf = self.Sdf
-        tex = self.UsdShade.Shader.Define(self.stage, path)
-        tex.CreateIdAttr("UsdUVTexture")
-        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
-        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(colour_space)
+        """A UsdUVTexture at `path` reading `file` at the `reader`'s `st`."""
+        T = self.types
+        tex = self.prim(path, "Shader")
+        self.attr(tex, "info:id", T.Token, "UsdUVTexture", uniform=True)
+        self.attr(tex, "inputs:file", T.Asset, self.Sdf.AssetPath(file))
+        self.attr(tex, "inputs:sourceColorSpace", T.Token, colour_space)
         wrap = "clamp" if clamp else "repeat"
-        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
-        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
-        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
-            reader.ConnectableAPI(), "result")
+        self.attr(tex, "inputs:wrapS", T.Token, wrap)
+        self.attr(tex, "inputs:wrapT", T.Token, wrap)
+        self.connect(self.attr(tex, "inputs:st", T.Float2), reader, "result")
         return tex
 
     def meshes(self, parent: str, mesh: TreeMesh, skel_path: str | None,
                offset: np.ndarray | None = None) -> None:
         """One Mesh prim per material part, vertices compacted per part."""
-        Vt, UsdGeom = self.Vt, self.UsdGeom
+        Vt, T = self.Vt, self.types
         for part in mesh.parts:
             if len(part.faces) == 0:
                 continue
@@ -181,33 +228,38 @@ class _Writer:
             pts = points_y_up(mesh.positions[used])
             if offset is not None:
                 pts = pts - offset
-            m = UsdGeom.Mesh.Define(self.stage, f"{parent}/{self.ident(part.material)}")
-            m.CreateSubdivisionSchemeAttr("none")
-            m.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)))
-            m.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(
-                points_y_up(mesh.normals[used]).astype(np.float32)))
-            m.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-            m.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
-            m.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1).astype(np.int32)))
+            m = self.prim(f"{parent}/{self.ident(part.material)}", "Mesh")
+            self.attr(m, "subdivisionScheme", T.Token, "none", uniform=True)
+            self.attr(m, "points", T.Point3fArray, Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)))
+            self.attr(m, "normals", T.Normal3fArray, Vt.Vec3fArray.FromNumpy(
+                points_y_up(mesh.normals[used]).astype(np.float32))).SetInfo("interpolation", "vertex")
+            self.attr(m, "faceVertexCounts", T.IntArray,
+                      Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
+            self.attr(m, "faceVertexIndices", T.IntArray,
+                      Vt.IntArray.FromNumpy(faces.reshape(-1).astype(np.int32)))
             lo, hi = pts.min(axis=0), pts.max(axis=0)
-            m.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi]).astype(np.float32)))
+            self.attr(m, "extent", T.Float3Array,
+                      Vt.Vec3fArray.FromNumpy(np.stack([lo, hi]).astype(np.float32)))
             if part.double_sided:
-                m.CreateDoubleSidedAttr(True)
-            st = UsdGeom.PrimvarsAPI(m).CreatePrimvar(
-                "st", self.Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
-            st.Set(Vt.Vec2fArray.FromNumpy(mesh.uvs[used].astype(np.float32)))
-            self.UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(
-                self.material(part.shader, part.colour))
+                self.attr(m, "doubleSided", T.Bool, True, uniform=True)
+            self.attr(m, "primvars:st", T.TexCoord2fArray,
+                      Vt.Vec2fArray.FromNumpy(mesh.uvs[used].astype(np.float32)),
+                      interpolation="vertex")
+            self.apply(m, "MaterialBindingAPI")
+            self.rel(m, "material:binding", self.material(part.shader, part.colour))
             if skel_path is not None:
-                b = self.UsdSkel.BindingAPI.Apply(m.GetPrim())
-                b.CreateSkeletonRel().SetTargets([self.Sdf.Path(skel_path)])
+                self.apply(m, "SkelBindingAPI")
+                self.rel(m, "skel:skeleton", skel_path)
                 w1 = mesh.weights[used, 1].astype(np.float32)
                 weights = np.stack([np.float32(1.0) - w1, w1], 1)
                 joints = mesh.joints[used].astype(np.int32)
-                b.CreateJointIndicesPrimvar(False, 2).Set(Vt.IntArray.FromNumpy(joints.ravel()))
-                b.CreateJointWeightsPrimvar(False, 2).Set(
-                    Vt.FloatArray.FromNumpy(weights.ravel()))
-                b.CreateGeomBindTransformAttr(self.Gf.Matrix4d(1.0))
+                self.attr(m, "primvars:skel:jointIndices", T.IntArray,
+                          Vt.IntArray.FromNumpy(joints.ravel()),
+                          interpolation="vertex", elementSize=2)
+                self.attr(m, "primvars:skel:jointWeights", T.FloatArray,
+                          Vt.FloatArray.FromNumpy(weights.ravel()),
+                          interpolation="vertex", elementSize=2)
+                self.attr(m, "primvars:skel:geomBindTransform", T.Matrix4d, self.Gf.Matrix4d(1.0))
 
     def tree(self, i: int, mesh: TreeMesh, path: str | None = None) -> int:
         """Tree i at `path` (default: a child of the root named after it);
@@ -216,30 +268,44 @@ class _Writer:
         if path is None:
             path = self.unique(self.root, t.name)
         if t.static:
-            self.UsdGeom.Xform.Define(self.stage, path)
+            if path != self.root:
+                self.prim(path, "Xform")
             self.meshes(path, mesh, None)
             return 0
-        Vt, Gf = self.Vt, self.Gf
-        self.UsdSkel.Root.Define(self.stage, path)
-        skel = self.UsdSkel.Skeleton.Define(self.stage, f"{path}/Skel")
+        if path == self.root:  # a tree layer: its root is the SkelRoot
+            self.layer.GetPrimAtPath(path).typeName = "SkelRoot"
+        else:
+            self.prim(path, "SkelRoot")
+        self.skeleton(t, f"{path}/Skel")
+        self.meshes(path, mesh, f"{path}/Skel")
+        return t.n_segments
+
+    def skeleton(self, t, path: str) -> None:
+        """Tree `t`'s Skeleton at `path` (joints, bind and rest transforms)
+        and its SkelAnimation `path`/Anim, sampled at the bake's frames and
+        the sub-frame times where a joint turns fast."""
+        Vt, Gf, T = self.Vt, self.Gf, self.types
+        skel = self.prim(path, "Skeleton")
         names = joint_names(t.name, t.paths)
-        tokens = joint_tokens(t.seg_parent, names)
-        skel.CreateJointsAttr(Vt.TokenArray(tokens))
-        skel.CreateJointNamesAttr(Vt.TokenArray(names))
+        tokens = Vt.TokenArray(joint_tokens(t.seg_parent, names))
+        self.attr(skel, "joints", T.TokenArray, tokens, uniform=True)
+        self.attr(skel, "jointNames", T.TokenArray, Vt.TokenArray(names), uniform=True)
         rest = points_y_up(t.points[t.seg_start]).astype(np.float64)
         S = t.n_segments
         bind = np.tile(np.eye(4), (S, 1, 1))
         bind[:, 3, :3] = rest  # Gf matrices are row-vector: translation in the last row
-        skel.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(bind))
+        self.attr(skel, "bindTransforms", T.Matrix4dArray, Vt.Matrix4dArray.FromNumpy(bind),
+                  uniform=True)
         par = t.seg_parent
         local_rest = bind.copy()
         has = par >= 0
         local_rest[has, 3, :3] = rest[has] - rest[par[has]]
-        skel.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(local_rest))
-        skel.GetPrim().CreateAttribute("treebake:segmentPaths",
-                                       self.Sdf.ValueTypeNames.StringArray).Set(list(t.paths))
-        anim = self.UsdSkel.Animation.Define(self.stage, f"{path}/Skel/Anim")
-        anim.CreateJointsAttr(Vt.TokenArray(tokens))
+        self.attr(skel, "restTransforms", T.Matrix4dArray,
+                  Vt.Matrix4dArray.FromNumpy(local_rest), uniform=True)
+        self.attr(skel, "treebake:segmentPaths", T.StringArray, Vt.StringArray(list(t.paths)),
+                  custom=True)
+        anim = self.prim(f"{path}/Anim", "SkelAnimation")
+        self.attr(anim, "joints", T.TokenArray, tokens, uniform=True)
         times, positions, rotations = t.samples(self.bake.times)
         # a skeleton's sub-frame codes hold every joint: one is kept where any
         # joint turns fast in that frame interval (TreeBake.fast_samples)
@@ -251,53 +317,60 @@ class _Writer:
         t_loc, q_loc = local_transforms(par, pos, rot)
         q_loc = continuous(qnormalize(q_loc), axis=0).astype(np.float32)
         t_loc = t_loc.astype(np.float32)
-        ta, ra = anim.CreateTranslationsAttr(), anim.CreateRotationsAttr()
-        anim.CreateScalesAttr(Vt.Vec3hArray(S, Gf.Vec3h(1.0, 1.0, 1.0)))
-        # the samples go straight into the layer (Sdf), in one change block:
-        # a third of the CPU of Usd.Attribute.Set per sample, the same bytes
-        layer, t_path, r_path = self.stage.GetRootLayer(), ta.GetPath(), ra.GetPath()
-        with self.Sdf.ChangeBlock():
-            for f, code in enumerate(self.codes(times)):
-                layer.SetTimeSample(t_path, code, Vt.Vec3fArray.FromNumpy(t_loc[f]))
-                layer.SetTimeSample(r_path, code, Vt.QuatfArray.FromNumpy(q_loc[f]))
-        self.UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
-            [anim.GetPath()])
-        self.meshes(path, mesh, f"{path}/Skel")
-        return S
+        ta = self.attr(anim, "translations", T.Float3Array).path
+        ra = self.attr(anim, "rotations", T.QuatfArray).path
+        self.attr(anim, "scales", T.Half3Array, Vt.Vec3hArray(S, Gf.Vec3h(1.0, 1.0, 1.0)))
+        layer = self.layer
+        for f, code in enumerate(self.codes(times)):
+            layer.SetTimeSample(ta, code, Vt.Vec3fArray.FromNumpy(t_loc[f]))
+            layer.SetTimeSample(ra, code, Vt.QuatfArray.FromNumpy(q_loc[f]))
+        self.apply(skel, "SkelBindingAPI")
+        self.rel(skel, "skel:animationSource", f"{path}/Anim")
 
     def objects(self) -> None:
         o = self.bake.objects
         if o is None or not len(o.sizes):
             return
-        Gf = self.Gf
+        Gf, T, layer = self.Gf, self.types, self.layer
         group = f"{self.root}/Projectiles"
-        self.UsdGeom.Xform.Define(self.stage, group)
+        self.prim(group, "Xform")
         pos = points_y_up(o.positions).astype(np.float64)
         rot = continuous(qnormalize(quats_y_up(o.rotations).astype(np.float64)), axis=0)
+        codes = self.codes(self.bake.times)
         for k, (shape, size) in enumerate(zip(o.shapes, o.sizes)):
-            x = self.UsdGeom.Xform.Define(self.stage, f"{group}/projectile_{k}")
-            tr = x.AddTranslateOp(self.UsdGeom.XformOp.PrecisionDouble)
-            orient = x.AddOrientOp(self.UsdGeom.XformOp.PrecisionFloat)
-            for f, code in enumerate(self.codes(self.bake.times)):
-                tr.Set(Gf.Vec3d(*pos[f, k].tolist()), code)
+            x = self.prim(f"{group}/projectile_{k}", "Xform")
+            # as UsdGeomXformable.AddXformOp authors them: each op, then the order
+            tr = self.attr(x, "xformOp:translate", T.Double3).path
+            order = self.attr(x, "xformOpOrder", T.TokenArray,
+                              self.Vt.TokenArray(["xformOp:translate"]), uniform=True)
+            orient = self.attr(x, "xformOp:orient", T.Quatf).path
+            order.default = self.Vt.TokenArray(["xformOp:translate", "xformOp:orient"])
+            for f, code in enumerate(codes):
+                layer.SetTimeSample(tr, code, Gf.Vec3d(*pos[f, k].tolist()))
                 q = rot[f, k]
-                orient.Set(Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
+                layer.SetTimeSample(orient, code,
+                                    Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])))
             mesh = object_mesh(shape, float(size))
             for part in mesh.parts:
                 part.colour = OBJECT_COLOUR
             self.meshes(f"{group}/projectile_{k}", mesh, None)
+
+    def payload(self, prim: str, asset: str) -> None:
+        """A typeless prim at `prim` whose payload is the layer `asset`."""
+        spec = self.prim(prim)
+        spec.payloadList.prependedItems.append(self.Sdf.Payload(asset))
 
     def codes(self, times: np.ndarray) -> list[float]:
         """USD time codes of sample times (s): frame numbers, fractional between."""
         return [float(c) for c in self.frame_start + np.asarray(times) * self.bake.fps]
 
     def save(self, path: Path) -> Path:
-        """Write the stage to `path` atomically, in the format its extension
+        """Write the layer to `path` atomically, in the format its extension
         asks (.usda text, .usd/.usdc binary crate): exported straight into
         the temporary file that is renamed over it."""
         with atomic_path(path, suffix=".tmp" + path.suffix) as tmp:
             try:
-                written = self.stage.GetRootLayer().Export(str(tmp))
+                written = self.layer.Export(str(tmp))
             except self.Tf.ErrorException as exc:  # as the OSError it is: a full disk named
                 raise _write_error(exc, path) from None
             if not written:  # no error raised, yet not written: never an empty file renamed
@@ -472,7 +545,7 @@ def _tree_layers(w: _Writer, bake: Bake, meshes: Sequence[TreeMesh], checked: se
         result.subframe_codes += layer.subframe_codes
         result.files.append(layer.file)
         result.validation_errors += layer.errors
-        w.stage.DefinePrim(prim).GetPayloads().AddPayload(f"./{spec.folder}/{layer.file.name}")
+        w.payload(prim, f"./{spec.folder}/{layer.file.name}")
         if progress is not None:
             progress(k, len(meshes))
 
