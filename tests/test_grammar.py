@@ -69,6 +69,10 @@ def test_abop_arrow_and_unicode():
     ("axiom: F\nbogus: 3\n", 2, 1, "unknown setting"),
     ("axiom: F\nangle: 1000\n", 2, 8, "out of range"),
     ("axiom: F\niterations: 2.5\n", 2, 13, "whole number"),
+    ("axiom: F\niterations: abc\n", 2, 13,
+     "iterations takes a whole number in [0, 1000] or an expression of #define constants: "
+     "unknown name 'abc'"),
+    ("axiom: F\nangle: 2*\n", 2, 10, "angle takes a number in [-360, 360]"),
     ("iterations: 2\n", 1, 1, "missing 'axiom"),
     ("axiom: F\nF -> F(1/0)\n", 2, 8, "division by zero"),
     ("axiom: F\nF(x) -> F(y)\n", 2, 11, "unknown name 'y'"),

@@ -119,8 +119,14 @@ def read_settings(headers: dict[str, tuple[str, int, int]], constants: dict[str,
         elif key in ("axiom", "modules"):
             continue
         else:
-            v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
             spec = _KEYS[key]
+            try:
+                v = evaluate_constant(value, constants, file=file, line=lineno, col=col)
+            except GrammarError as exc:  # which setting, and what it takes
+                what = "a whole number" if spec.kind == "integer" else "a number"
+                raise GrammarError(f"{spec.name} takes {what} in {spec.range_text()} or an "
+                                   f"expression of #define constants: {exc.message}",
+                                   exc.file, exc.line, exc.col) from None
             if (spec.lo is not None and v < spec.lo) or (spec.hi is not None and v > spec.hi):
                 raise err(f"{spec.name} {spec.out_of_range(float(v))}", col)
             if spec.kind == "integer":
