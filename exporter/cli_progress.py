@@ -9,6 +9,9 @@ import sys
 import time
 
 PLAIN_PROGRESS_SECONDS = 5.0  # without a terminal: a plain progress line this often
+# below this share done the rate is a few frames' noise: "estimating", not an
+# ETA (preset:felling's first second read "510 s left" for a 65 s bake)
+ETA_FROM_SHARE = 0.02
 
 
 def plain_interval() -> float:
@@ -40,7 +43,7 @@ def progress_bar(label: str):
             start.append(time.perf_counter())
         elapsed = time.perf_counter() - start[0]
         share = min(1.0, done / total) if total > 0 else 1.0
-        eta = elapsed / share * (1.0 - share) if share > 0 else float("nan")
+        eta = elapsed / share * (1.0 - share) if share >= ETA_FROM_SHARE else float("nan")
         left = "estimating" if math.isnan(eta) else f"{eta:.0f} s left"
         finished[0] = share >= 1.0
         if not tty:

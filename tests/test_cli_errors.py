@@ -294,6 +294,25 @@ def test_the_eta_counts_from_the_first_report_not_the_stages_before(monkeypatch,
                      "simulating: done in 20.0 s"]
 
 
+def test_no_eta_from_the_first_few_frames(monkeypatch, capsys):
+    """Under 2 % done, the rate is a few frames' noise: preset:felling read
+    "510 s left" after its first second, for a 65 s bake."""
+    from treebake import cli_progress
+
+    now = [0.0]
+    monkeypatch.setattr(cli_progress.time, "perf_counter", lambda: now[0])
+    monkeypatch.setenv("TREEBAKE_PROGRESS_SECONDS", "0")
+    show = cli_progress.progress_bar("simulating")
+    show(0.0, 1.0)
+    now[0] = 1.0
+    show(0.002, 1.0)  # 0.2 % done in 1 s
+    now[0] = 3.0
+    show(0.05, 1.0)  # 5 % done in 3 s
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == ["simulating: 0 %, estimating", "simulating: 0 %, estimating",
+                     "simulating: 5 %, 57 s left"]
+
+
 @pytest.mark.parametrize("args, message", [
     (["bake", "sapling", "--workers", "0"], "--workers must be >= 1, got 0"),
     (["batch", "JOBS", "--jobs", "0"], "--jobs must be >= 1, got 0"),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,12 +22,28 @@ from .rules import FELL_NUDGE
 # CPU per segment and frame, relative to the linear tier's, at `default`
 # (docs/physics.md, "What each engine costs")
 COST = {Engine.LINEAR: 1.0, Engine.PYMUNK: 40.0, Engine.REFERENCE: 25.0}
-# a felled tree costs more once it falls (on the pymunk tier from when it
-# leans a quarter of its hinge angle: its steps split for the fast turn; on
-# the reference from when its hinge snaps): IMPACT times as much for
-# IMPACT_TIME s (the fall, the breaks, the parts on the ground), then LYING
-FAST_LEAN = {Engine.PYMUNK: 0.25, Engine.REFERENCE: 1.0}
-IMPACT, IMPACT_TIME, LYING = 7.0, 3.0, 3.0
+
+
+@dataclass(frozen=True)
+class FallCost:
+    """What a felled tree costs its engine once it falls, as multiples of
+    its cost standing: `impact` times for `impact_time` s from when it
+    leans `lean` rad (None: its hinge angle times `hinge_share`), then
+    `lying` times."""
+
+    lean: float | None
+    hinge_share: float
+    impact: float
+    impact_time: float
+    lying: float
+
+
+# the pymunk tier's steps split for the fast turn from a quarter of the
+# hinge angle on; the reference's cost rises when the tree reaches the
+# ground (its contacts and breaks), not when its hinge snaps
+# (docs/physics.md, "What each engine costs")
+FALL = {Engine.PYMUNK: FallCost(None, 0.25, 7.0, 3.0, 3.0),
+        Engine.REFERENCE: FallCost(math.pi / 2, 1.0, 7.0, 2.0, 4.0)}
 FORWARD_SECONDS = 0.5  # a worker's ticks to the parent at most this often
 
 
@@ -88,10 +105,14 @@ class ChunkPlan:
             if t.cut is not None:  # known: it leaves for the cut's engine then, and falls
                 engine = engine_for(Reason.CUT, quality)
                 f = min(frames - 1, int(t.cut.time * scene.fps))
-                fall = t.cut.time + lean_time(t, scene, FAST_LEAN[engine])
-                rest = min(frames - 1, int((fall + IMPACT_TIME) * scene.fps))
-                self.size[i, min(frames - 1, int(fall * scene.fps)):rest] *= IMPACT
-                self.size[i, rest:] *= LYING
+                cost = FALL[engine]
+                lean = cost.lean
+                if lean is None:
+                    lean = cost.hinge_share * math.radians(t.cut.hinge)
+                fall = t.cut.time + lean_time(t, scene, lean)
+                rest = min(frames - 1, int((fall + cost.impact_time) * scene.fps))
+                self.size[i, min(frames - 1, int(fall * scene.fps)):rest] *= cost.impact
+                self.size[i, rest:] *= cost.lying
                 self.cost[i, f:] = COST[engine] * self.size[i, f:]
         self.cost[:, 0] = 0.0  # frame 0 is the rest pose
         self.counted = np.zeros(len(trees), dtype=np.int64)  # per tree, frames done
@@ -154,11 +175,12 @@ class ForwardedPlan:
             _EVENTS.put((self.k, "tick", engine, list(trees), frame))
 
 
-def lean_time(tree: SimTree, scene: Scene, share: float) -> float:
-    """Seconds from a tree's felling cut until it leans `share` of its hinge
-    angle (at 1 the hinge snaps and it falls free), as a rigid rod of the
-    tree's height tipping about its base from the feller's nudge:
-    theta(t) = (w0 / lam) sinh(lam t), lam^2 = 3 g / (2 H). For the ETA."""
+def lean_time(tree: SimTree, scene: Scene, lean: float) -> float:
+    """Seconds from a tree's felling cut until it leans `lean` rad from
+    upright (its hinge angle: the hinge snaps; pi/2: it lies on the
+    ground), as a rigid rod of the tree's height tipping about its base
+    from the feller's nudge: theta(t) = (w0 / lam) sinh(lam t), lam^2 =
+    3 g / (2 H). For the ETA."""
     height = max(float(tree.rig.model.height), 0.1)
     lam = math.sqrt(3.0 * max(scene.gravity, 1e-3) / (2.0 * height))
-    return math.asinh(share * math.radians(tree.cut.hinge) * lam / FELL_NUDGE) / lam
+    return math.asinh(lean * lam / FELL_NUDGE) / lam
