@@ -231,8 +231,9 @@ class _Writer:
             m = self.prim(f"{parent}/{self.ident(part.material)}", "Mesh")
             self.attr(m, "subdivisionScheme", T.Token, "none", uniform=True)
             self.attr(m, "points", T.Point3fArray, Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)))
-            self.attr(m, "normals", T.Normal3fArray, Vt.Vec3fArray.FromNumpy(
-                points_y_up(mesh.normals[used]).astype(np.float32))).SetInfo("interpolation", "vertex")
+            normals = self.attr(m, "normals", T.Normal3fArray, Vt.Vec3fArray.FromNumpy(
+                points_y_up(mesh.normals[used]).astype(np.float32)))
+            normals.SetInfo("interpolation", "vertex")  # after the value, as UsdGeom sets it
             self.attr(m, "faceVertexCounts", T.IntArray,
                       Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
             self.attr(m, "faceVertexIndices", T.IntArray,

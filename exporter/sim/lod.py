@@ -79,6 +79,8 @@ def _simulate(trees, plan, scene, loads, workers, log, progress) -> Iterator[Chu
         for k, (q, members) in enumerate(plan):
             yield simulate_chunk([trees[i] for i in members], scene, q, loads, log,
                                  None if progress is None else progress.chunk(k))
+            if progress is not None:  # what its plan still held was not needed
+                progress.chunk_done(k)
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor

@@ -187,6 +187,10 @@ class Chunk:
                 out.append([ho.offset_work(self.work_before.get(run.trees[ho.tree], 0.0))
                             for ho in left])
                 gone = {run.trees[ho.tree] for ho in left}
+                if self.progress is not None:  # planned on its next engine now, not
+                    for ho in left:  # when that engine's run starts (after this one)
+                        self.progress.start(engine_for(ho.reason, self.quality),
+                                            [run.trees[ho.tree]], f)
                 live = [i for i in live if i not in gone]
                 segments = sum(self.trees[i].rig.model.n_segments for i in live)
             if self.progress is not None:
