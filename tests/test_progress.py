@@ -136,3 +136,29 @@ def test_a_tree_leaving_a_tier_is_planned_on_its_next_engine_at_once():
     assert told == [("start", Engine.LINEAR, [0, 1], 1), ("tick", Engine.LINEAR, [0, 1], 1),
                     ("start", Engine.REFERENCE, [1], 2), ("tick", Engine.LINEAR, [0], 2),
                     ("tick", Engine.LINEAR, [0], 3)]
+
+
+def test_a_felled_trees_fall_is_timed_by_a_tipping_rod():
+    """lean_time against the rod's equation integrated step by step
+    (theta'' = lam^2 theta, from the feller's nudge), to its hinge angle
+    and to the ground; the reference's costly frames start at the ground."""
+    import math
+    from types import SimpleNamespace
+
+    from treebake.sim.rules import FELL_NUDGE
+
+    tree = SimpleNamespace(rig=SimpleNamespace(model=SimpleNamespace(height=16.5)),
+                           cut=SimpleNamespace(hinge=40.0))
+    scene = SimpleNamespace(gravity=9.81)
+    lam2 = 3.0 * 9.81 / (2.0 * 16.5)
+    theta, rate, t, dt, reached = 0.0, FELL_NUDGE, 0.0, 1e-5, {}
+    while theta < math.pi / 2:  # semi-implicit Euler
+        rate += lam2 * theta * dt
+        theta += rate * dt
+        t += dt
+        for lean in (math.radians(40.0), math.pi / 2):
+            if theta >= lean and lean not in reached:
+                reached[lean] = t
+    for lean, when in reached.items():
+        assert progress.lean_time(tree, scene, lean) == pytest.approx(when, abs=1e-3)
+    assert progress.FALL[Engine.REFERENCE].hinge_share is None  # from the ground

@@ -28,11 +28,10 @@ COST = {Engine.LINEAR: 1.0, Engine.PYMUNK: 40.0, Engine.REFERENCE: 25.0}
 class FallCost:
     """What a felled tree costs its engine once it falls, as multiples of
     its cost standing: `impact` times for `impact_time` s from when it
-    leans `lean` rad (None: its hinge angle times `hinge_share`), then
-    `lying` times."""
+    leans `hinge_share` of its hinge angle (None: from when it reaches the
+    ground), then `lying` times."""
 
-    lean: float | None
-    hinge_share: float
+    hinge_share: float | None
     impact: float
     impact_time: float
     lying: float
@@ -42,8 +41,8 @@ class FallCost:
 # hinge angle on; the reference's cost rises when the tree reaches the
 # ground (its contacts and breaks), not when its hinge snaps
 # (docs/physics.md, "What each engine costs")
-FALL = {Engine.PYMUNK: FallCost(None, 0.25, 7.0, 3.0, 3.0),
-        Engine.REFERENCE: FallCost(math.pi / 2, 1.0, 7.0, 2.0, 4.0)}
+FALL = {Engine.PYMUNK: FallCost(0.25, 7.0, 3.0, 3.0),
+        Engine.REFERENCE: FallCost(None, 7.0, 2.0, 4.0)}
 FORWARD_SECONDS = 0.5  # a worker's ticks to the parent at most this often
 
 
@@ -106,9 +105,8 @@ class ChunkPlan:
                 engine = engine_for(Reason.CUT, quality)
                 f = min(frames - 1, int(t.cut.time * scene.fps))
                 cost = FALL[engine]
-                lean = cost.lean
-                if lean is None:
-                    lean = cost.hinge_share * math.radians(t.cut.hinge)
+                lean = (math.pi / 2 if cost.hinge_share is None
+                        else cost.hinge_share * math.radians(t.cut.hinge))
                 fall = t.cut.time + lean_time(t, scene, lean)
                 rest = min(frames - 1, int((fall + cost.impact_time) * scene.fps))
                 self.size[i, min(frames - 1, int(fall * scene.fps)):rest] *= cost.impact
