@@ -142,7 +142,7 @@ class ChunkPlan:
             self.owner.tell()
 
 
-_EVENTS = None  # a worker process's queue to the parent (listen_to)
+_EVENTS = None  # a worker process's queue to the parent (forward_to)
 
 
 def forward_to(events) -> None:
